@@ -1,0 +1,1 @@
+"""The companion process: configuration, vehicle link, camera ingest, mission, main loop, CLI."""

@@ -1,0 +1,9 @@
+"""`wireavoid` commands of the training domain."""
+
+from __future__ import annotations
+
+import typer
+
+
+def register(app: typer.Typer, bench: typer.Typer) -> None:
+    """Add this domain's commands to the root app and its benchmarks to `wireavoid bench`."""

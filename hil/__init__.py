@@ -1,0 +1,1 @@
+"""Software-in-the-loop harness: a PX4-like vehicle over real MAVLink, simulated cameras."""

@@ -1,0 +1,1 @@
+"""Wire segmentation (thesis ch. 2): pure, synchronous; arrays in, arrays out."""
