@@ -9,6 +9,7 @@ import typer
 
 from companion import (
     cli_catenary,
+    cli_config,
     cli_flight,
     cli_mapping,
     cli_perception,
@@ -34,6 +35,7 @@ bench_app = typer.Typer(
 app.add_typer(bench_app, name="bench")
 
 for _module in (
+    cli_config,
     cli_vehicle,
     cli_flight,
     cli_perception,

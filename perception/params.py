@@ -1,10 +1,14 @@
 """Tunables of wire segmentation (thesis ch. 2, 4.4.1), composed into `Settings`."""
 
-from pydantic import BaseModel, Field
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
 
 
 class PerceptionParams(BaseModel):
     """Wire-segmentation parameters; each field names its unit and thesis reference."""
+
+    model_config = ConfigDict(extra="forbid")
 
     model: str = Field(
         "k32-k32-d1-d2-d4-d8-d16-d1-k2", description="architecture name of the zoo (2.3.1)"
@@ -12,3 +16,156 @@ class PerceptionParams(BaseModel):
     confidence_threshold: float = Field(
         0.95, gt=0, lt=1, description="wire-probability threshold of the mask (4.4.1)"
     )
+    canny_low_threshold: float = Field(
+        50.0, ge=0, le=1000, description="Canny hysteresis low threshold of RGBLE's E map (2.3.4)"
+    )
+    canny_high_threshold: float = Field(
+        150.0, ge=0, le=1000, description="Canny hysteresis high threshold of RGBLE's E map (2.3.4)"
+    )
+    lsd_line_thickness_px: int = Field(
+        1, ge=1, le=5, description="thickness of LSD segments drawn into RGBLE's L map, px (2.3.4)"
+    )
+    min_wire_component_px: int = Field(
+        20,
+        ge=0,
+        le=100_000,
+        description="speckle filter: 8-connected mask components smaller than this, px, are "
+        "dropped (4.4.1)",
+    )
+    runtime: Literal["auto", "torch", "torch-bf16", "onnx", "onnx-int8", "tensorrt"] = Field(
+        "auto",
+        description="inference runtime: auto picks tensorrt > onnx > torch by availability; "
+        "the reduced-precision CPU ones (torch-bf16, onnx-int8) only when named",
+    )
+    inference_threads: int = Field(
+        0, ge=0, le=256, description="CPU threads of torch/ONNX Runtime inference; 0 = all cores"
+    )
+    baseline_min_component_px: int = Field(
+        30,
+        ge=0,
+        le=100_000,
+        description="Candamo baseline: edge components (8-connected) smaller than this, px, "
+        "are removed (2.4.3)",
+    )
+    baseline_windows: int = Field(
+        4, ge=1, le=16, description="Candamo baseline: Hough subwindows per image side (2.4.3: 4x4)"
+    )
+    baseline_hough_votes_fraction: float = Field(
+        0.7,
+        gt=0,
+        le=2,
+        description="Candamo baseline: Hough accumulator threshold as a fraction of the "
+        "subwindow's shorter side, votes per px (2.4.3; tuned on synthetic seed 5)",
+    )
+    baseline_max_lines_per_window: int = Field(
+        6, ge=1, le=100, description="Candamo baseline: strongest Hough lines kept per subwindow"
+    )
+    baseline_max_thickness_px: int = Field(
+        5,
+        ge=1,
+        le=15,
+        description="Candamo baseline: lines drawn 1..N px thick give the score levels (2.4.3)",
+    )
+
+
+class SyntheticParams(BaseModel):
+    """Ranges of the synthetic wire generator (2.3.2); distances in metres, sizes in pixels."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    hfov_min_deg: float = Field(40.0, gt=5, lt=170, description="narrowest horizontal FOV, deg")
+    hfov_max_deg: float = Field(110.0, gt=5, lt=170, description="widest horizontal FOV, deg")
+    camera_altitude_min_m: float = Field(
+        1.5, gt=0, description="lowest camera height above ground, m"
+    )
+    camera_altitude_max_m: float = Field(
+        60.0, gt=0, description="highest camera height above ground, m"
+    )
+    pitch_max_deg: float = Field(30.0, ge=0, le=80, description="|camera pitch| bound, deg")
+    roll_std_deg: float = Field(8.0, ge=0, le=45, description="camera roll standard deviation, deg")
+    wire_distance_min_m: float = Field(
+        2.5, gt=0, description="nearest wire anchor along the ray, m"
+    )
+    wire_distance_max_m: float = Field(250.0, gt=0, description="farthest wire anchor, m")
+    wire_height_min_m: float = Field(1.0, ge=0, description="lowest wire anchor above ground, m")
+    wire_height_max_m: float = Field(50.0, gt=0, description="highest wire anchor above ground, m")
+    bundles_max: int = Field(
+        3, ge=1, le=10, description="most wire bundles (independent spans) per image"
+    )
+    conductors_max: int = Field(6, ge=1, le=12, description="most parallel conductors in a bundle")
+    conductor_spacing_min_m: float = Field(0.2, gt=0, description="closest conductor spacing, m")
+    conductor_spacing_max_m: float = Field(4.0, gt=0, description="widest conductor spacing, m")
+    span_min_m: float = Field(10.0, gt=0, description="shortest span between supports, m")
+    span_max_m: float = Field(300.0, gt=0, description="longest span between supports, m")
+    sag_ratio_max: float = Field(0.06, ge=0, le=0.3, description="largest sag / span of catenaries")
+    straight_probability: float = Field(
+        0.3, ge=0, le=1, description="share of bundles that are straight, taut lines"
+    )
+    diameter_min_m: float = Field(0.004, gt=0, description="thinnest wire diameter, m")
+    diameter_max_m: float = Field(0.035, gt=0, description="thickest wire diameter, m")
+    width_floor_min_px: float = Field(
+        0.5, gt=0, le=3, description="lowest floor of the rendered wire width (far wires), px"
+    )
+    width_floor_max_px: float = Field(
+        1.2, gt=0, le=5, description="highest floor of the rendered wire width, px"
+    )
+    contrast_min: float = Field(
+        0.12, ge=0, le=1, description="least wire-background luminance difference (0-1 scale)"
+    )
+    contrast_max: float = Field(
+        0.3, ge=0, le=1, description="most enforced wire-background luminance difference"
+    )
+    width_max_px: float = Field(12.0, gt=0, le=60, description="thickest rendered wire, px")
+    no_wire_probability: float = Field(
+        0.1, ge=0, le=1, description="share of images without wires (hard negatives)"
+    )
+    supersampling: int = Field(4, ge=1, le=8, description="anti-aliasing supersampling factor")
+    photo_probability: float = Field(
+        0.3, ge=0, le=1, description="share of backgrounds that are real photographs, when any"
+    )
+
+
+class TrainingParams(BaseModel):
+    """Training of a zoo model on synthetic data (2.3.3, 2.4.2); `wireavoid train` fills it."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    model: str = Field("k32-k32-d1-d2-d4-d8-d16-d1-k2", description="zoo name or grid label")
+    input_mode: str = Field("rgb", pattern="^(rgb|rgble)$", description="network input (2.3.4)")
+    steps: int = Field(2000, ge=1, description="optimiser steps (thesis: 2000 at batch 4, 2.4.2)")
+    batch: int = Field(8, ge=1, le=1024, description="images per step and process")
+    crop_height_px: int = Field(176, ge=16, le=4096, description="training image height, px")
+    crop_width_px: int = Field(240, ge=16, le=4096, description="training image width, px")
+    optimizer: str = Field(
+        "adam", pattern="^(adam|adadelta)$", description="Adam, or AdaDelta as in 2.4.2"
+    )
+    learning_rate: float = Field(
+        0.0, ge=0, le=10, description="0 = optimiser default (Adam 1e-3, AdaDelta 1.0)"
+    )
+    final_lr_fraction: float = Field(
+        0.1, gt=0, le=1, description="cosine decay of the learning rate down to this fraction"
+    )
+    balance_beta_max: float = Field(
+        0.99,
+        gt=0.5,
+        le=1,
+        description="cap of the HED class-balance weight beta = |Y-|/|Y| (2.3.3), so that "
+        "images without wires still train the negatives with weight >= 1 - cap",
+    )
+    seed: int = Field(
+        0,
+        ge=0,
+        lt=1_000_000,
+        description="seed of training data and initialisation; "
+        "the held-out set uses seed 1,000,000",
+    )
+    checkpoint_every: int = Field(200, ge=1, description="steps between checkpoints")
+    workers: int = Field(1, ge=0, le=64, description="data-generation worker processes")
+    bf16: bool = Field(True, description="bf16 autocast where the CPU/GPU supports it")
+    photo_sources: list[str] = Field(
+        default_factory=lambda: ["skimage"],
+        description="real-photo backgrounds: 'skimage' and/or folders (2.3.2)",
+    )
+    eval_count: int = Field(64, ge=0, description="held-out synthetic images evaluated at the end")
+    eval_height_px: int = Field(240, ge=16, description="held-out image height, px")
+    eval_width_px: int = Field(320, ge=16, description="held-out image width, px")

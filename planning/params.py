@@ -1,13 +1,204 @@
 """Tunables of the trajectory-library planner (thesis 4.5), composed into `Settings`."""
 
-from pydantic import BaseModel, Field
+from enum import StrEnum
+
+from pydantic import BaseModel, Field, model_validator
+
+
+class UnknownPolicy(StrEnum):
+    """How the planner treats map points no observation has seen (unknown is not free)."""
+
+    FREE = "free"  # unseen counts as free (the thesis' implicit choice; optimistic)
+    COLLISION = "collision"  # unseen counts as occupied everywhere on the checked segment
+    COST = "cost"  # unseen within the braking distance is a collision, beyond it a cost
+
+
+class YawPolicy(StrEnum):
+    """Where the vehicle's nose points while it tracks a trajectory."""
+
+    MOTION = "motion"  # face the direction of the commanded horizontal velocity
+    GOAL = "goal"  # face the goal
+    FIXED = "fixed"  # hold `fixed_yaw_rad`
+
+
+class CheckMode(StrEnum):
+    """How trajectories are batched into occupancy queries (eq. 4.5 per waypoint)."""
+
+    ALL = "all"  # one query for every waypoint of every trajectory
+    CHUNKED = "chunked"  # cost-ordered chunks of `check_chunk_size` trajectories, one query each
 
 
 class PlanningParams(BaseModel):
     """Planner parameters; each field names its unit and thesis reference."""
 
+    # --- vehicle limits the library is built from (4.5, Fig. 4.8) ---
+    max_speed_mps: float = Field(
+        2.0, gt=0, le=15, description="cruise speed (4.6.2 flew 2 m/s), m/s"
+    )
+    max_accel_mps2: float = Field(
+        2.0, gt=0, le=20, description="largest acceleration per axis of the library, m/s^2"
+    )
+    max_jerk_mps3: float = Field(
+        4.0, gt=0, le=100, description="largest jerk of the library (lateral: v * yaw accel), m/s^3"
+    )
+    max_yaw_rate_radps: float = Field(
+        0.8, gt=0, le=6.3, description="largest yaw rate of turns and of the tracker, rad/s"
+    )
+    max_vertical_speed_mps: float = Field(
+        1.0, gt=0, le=5, description="fastest climb/descent of the library, m/s"
+    )
+    # --- library shape (Fig. 4.8) ---
+    horizon_s: float = Field(4.0, gt=0.5, le=20, description="duration of each trajectory, s")
+    waypoints: int = Field(
+        20, ge=4, le=200, description="m, waypoints each trajectory is sampled into (eq. 4.7)"
+    )
+    turn_levels: int = Field(
+        3, ge=0, le=12, description="turn curvatures per side (left and right), count"
+    )
+    max_heading_change_rad: float = Field(
+        1.4, gt=0, le=3.1, description="heading change of the sharpest turn over the horizon, rad"
+    )
+    climb_levels: int = Field(
+        2, ge=0, le=8, description="climb rates per direction (climb and descend), count"
+    )
+    speed_levels: int = Field(
+        2, ge=1, le=5, description="target speeds, evenly spaced in (0, max_speed_mps], count"
+    )
+    speed_bins: int = Field(
+        9,
+        ge=2,
+        le=41,
+        description="initial speeds in [0, max_speed_mps] a library is built at, count",
+    )
+    integration_substeps: int = Field(
+        8, ge=1, le=50, description="integration steps between two waypoints, count"
+    )
+    # --- selection (eq. 4.7, 4.8) ---
     alpha: float = Field(
         0.5, ge=0, le=1, description="alpha, distance vs heading weight of eq. 4.7/4.8"
     )
-    max_speed_mps: float = Field(2.0, gt=0, description="cruise speed (4.6.2 flew 2 m/s), m/s")
-    rate_hz: float = Field(10.0, gt=0, description="receding-horizon replanning rate, Hz")
+    distance_scale_m: float = Field(
+        1.0, gt=0, le=100, description="distance that weighs like 1 rad of heading (eq. 4.8), m"
+    )
+    descent_cost_per_m: float = Field(
+        0.3,
+        ge=0,
+        le=10,
+        description=(
+            "cost per m of net descent, so wires are passed over rather than under "
+            "(sag; thesis 4.7.2 run 10 failed going under), 1/m"
+        ),
+    )
+    switch_cost: float = Field(
+        1.0,
+        ge=0,
+        le=10,
+        description=(
+            "hysteresis: cost per (max speed x horizon) of mean waypoint distance between a "
+            "trajectory and last cycle's choice"
+        ),
+    )
+    unknown_policy: UnknownPolicy = Field(
+        UnknownPolicy.COST, description="unseen map points: free, collision, or cost (4.4.5)"
+    )
+    unknown_cost: float = Field(
+        2.0, ge=0, le=100, description="cost of a fully unseen checked segment (policy 'cost')"
+    )
+    safety_margin_m: float = Field(
+        0.5,
+        ge=0,
+        le=10,
+        description="free path required beyond the pruned end plus braking distance, m",
+    )
+    min_altitude_m: float = Field(
+        1.0, ge=0, le=100, description="flight floor above home (NED z = 0); lower is collision, m"
+    )
+    min_track_s: float = Field(
+        1.5,
+        ge=0,
+        le=20,
+        description="a chosen trajectory is followed at least this long even if pruned earlier, s",
+    )
+    check_mode: CheckMode = Field(CheckMode.ALL, description="batching of collision queries")
+    check_chunk_size: int = Field(
+        16, ge=1, le=1000, description="trajectories per query in 'chunked' mode, count"
+    )
+    # --- receding horizon and recovery (4.5) ---
+    rate_hz: float = Field(10.0, ge=10, le=100, description="receding-horizon replanning rate, Hz")
+    hover_speed_mps: float = Field(
+        0.25, gt=0, le=2, description="speed under which the vehicle counts as stopped, m/s"
+    )
+    align_heading_rad: float = Field(
+        1.2,
+        gt=0,
+        le=3.2,
+        description="when stopped and the goal is further off the nose, rotate to it first, rad",
+    )
+    recovery_yaw_rate_radps: float = Field(
+        0.6, gt=0, le=3, description="yaw rate of the rotate-in-place recovery (4.5), rad/s"
+    )
+    recovery_max_turn_rad: float = Field(
+        6.3, gt=0, le=20, description="rotation without finding a way before rewinding, rad"
+    )
+    stuck_timeout_s: float = Field(
+        8.0, gt=0, le=120, description="no progress to the goal for this long means stuck, s"
+    )
+    progress_min_m: float = Field(
+        0.5, gt=0, le=20, description="distance-to-goal gain that counts as progress, m"
+    )
+    breadcrumb_spacing_m: float = Field(
+        0.5, gt=0, le=10, description="spacing of the recorded flown path (rewind), m"
+    )
+    breadcrumb_max: int = Field(400, ge=10, le=10000, description="flown-path points kept, count")
+    rewind_distance_m: float = Field(
+        4.0, gt=0, le=100, description="how far back along the flown path a rewind goes, m"
+    )
+    rewind_speed_mps: float = Field(0.8, gt=0, le=5, description="speed of a rewind, m/s")
+    max_rewinds: int = Field(
+        3, ge=0, le=50, description="rewinds without progress before the goal is unreachable"
+    )
+    # --- goals ---
+    arrival_tolerance_m: float = Field(
+        0.5, gt=0, le=20, description="distance to the goal that counts as arrived, m"
+    )
+    unreachable_confirm_cycles: int = Field(
+        5, ge=1, le=100, description="cycles the goal must be seen in collision, count"
+    )
+    # --- path tracking ---
+    position_gain_per_s: float = Field(
+        1.0, ge=0, le=10, description="velocity correction per m of position error, 1/s"
+    )
+    max_correction_mps: float = Field(
+        1.0, ge=0, le=10, description="largest position-error velocity correction, m/s"
+    )
+    velocity_lead_s: float = Field(
+        0.2,
+        ge=0,
+        le=2,
+        description="feed-forward: the velocity setpoint is the reference's this far ahead, s",
+    )
+    blend_time_s: float = Field(
+        0.5, ge=0, le=5, description="time a new trajectory's start offset fades out over, s"
+    )
+    setpoint_accel_slack: float = Field(
+        1.5, ge=1, le=10, description="setpoint velocity change limit, in units of max accel"
+    )
+    yaw_policy: YawPolicy = Field(YawPolicy.MOTION, description="where the nose points")
+    fixed_yaw_rad: float = Field(0.0, ge=-3.1416, le=3.1416, description="yaw of policy 'fixed'")
+    yaw_motion_min_speed_mps: float = Field(
+        0.5, gt=0, le=5, description="below this speed policy 'motion' holds the yaw, m/s"
+    )
+    setpoint_rate_hz: float = Field(
+        20.0, ge=20, le=200, description="tracker setpoint rate (flight link), Hz"
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "PlanningParams":
+        if self.hover_speed_mps >= self.max_speed_mps:
+            raise ValueError("hover_speed_mps must be below max_speed_mps")
+        return self
+
+    @property
+    def library_size(self) -> int:
+        """Trajectories in one speed bin: turns x climbs x speeds, plus the stop."""
+        return (2 * self.turn_levels + 1) * (2 * self.climb_levels + 1) * self.speed_levels + 1

@@ -1,0 +1,189 @@
+"""Fitted catenaries as wire obstacles in the collision check (3.7.2) and planning with them."""
+
+import numpy as np
+import pytest
+
+from companion.config import Settings
+from mapping.camera import body_from_camera_from_params, stereo_rig_from_params, world_from_camera
+from mapping.catenary_instances import reconstruct_wires
+from mapping.catenary_mapper import CatenaryMapper
+from mapping.catenary_model import catenary_points_ned_m, sample_abscissae_m
+from mapping.catenary_obstacle import (
+    CatenaryAwareMap,
+    WireObstacle,
+    collision_map,
+    distance_to_polyline_m,
+    inside_tube,
+    projected_curve_mask,
+    unexplained_wire_mask,
+    wire_obstacle,
+)
+from mapping.droan import DroanMap
+from mapping.pose import Pose
+from mapping.query import OccupancyQuery
+from planning.library import generate_library
+from planning.planner import LocalPlanner
+from planning.tracker import PathTracker
+from planning.types import PlannerState, VehicleState
+
+SETTINGS = Settings()
+MAPPING = SETTINGS.mapping
+PARAMS = SETTINGS.catenary.model_copy(update={"use_in_collision_check": True})
+# A wire across the flight line, 12 m ahead of the last keyframe and 3 m below it.
+THETA_TRUE = np.array([8.0, 0.0, -7.0, np.pi / 2, 40.0])
+START = np.array([-4.0, 0.0, -10.0])
+GOAL = np.array([16.0, 0.0, -10.0])
+
+
+class EmptyMap:
+    """Everything seen and free."""
+
+    def query(self, points_ned_m: np.ndarray) -> OccupancyQuery:
+        n = len(points_ned_m)
+        return OccupancyQuery(np.zeros(n, bool), np.zeros(n), np.ones(n, bool))
+
+
+def test_tube_radius_is_interpolated_along_the_polyline() -> None:
+    obstacle = WireObstacle(np.array([[0.0, 0, 0], [10.0, 0, 0]]), np.array([1.0, 3.0]), 0.0)
+    points = np.array([[0.0, 0, 0.9], [0.0, 0, 1.1], [5.0, 1.9, 0], [5.0, 2.1, 0], [12.0, 0, 0]])
+    np.testing.assert_array_equal(inside_tube(points, obstacle), [1, 0, 1, 0, 1])
+    distance, index, fraction = distance_to_polyline_m(points[2:3], obstacle.points_ned_m)
+    np.testing.assert_allclose([distance[0], index[0], fraction[0]], [1.9, 0, 0.5])
+
+
+def test_the_switch_off_leaves_the_base_map_alone() -> None:
+    base = EmptyMap()
+    off = PARAMS.model_copy(update={"use_in_collision_check": False})
+    assert collision_map(base, [], off, 0.5, 1.0) is base
+    assert isinstance(collision_map(base, [], PARAMS, 0.5, 1.0), CatenaryAwareMap)
+
+
+@pytest.fixture(scope="module")
+def approach():
+    """Keyframes of a level approach, the fitted wire and both maps (slab only / catenary)."""
+    rig = stereo_rig_from_params(MAPPING.camera)
+    camera = rig.camera
+    mount = body_from_camera_from_params(MAPPING.camera)
+    dense = catenary_points_ned_m(THETA_TRUE, sample_abscissae_m(PARAMS.half_span_m, 2000))
+    poses, masks = [], []
+    for i, x in enumerate(np.arange(-12.0, -3.9, 0.6)):
+        position = np.array([x, 0.3 * np.sin(i), -10.0 + 0.2 * np.cos(i)])
+        pose = world_from_camera(Pose.from_yaw_pitch_roll(0, 0, 0, position), mount)
+        poses.append(pose)
+        masks.append(projected_curve_mask(camera, pose, dense, 2))
+    stamps = 0.2 * np.arange(len(poses))
+    fits = reconstruct_wires(
+        camera, poses, masks, stamps, PARAMS, MAPPING.wire_depth_near_m, MAPPING.wire_depth_far_m
+    )
+    obstacles = [o for f in fits if (o := wire_obstacle(f, MAPPING.robot_radius_m, PARAMS))]
+
+    def droan(explain: bool) -> DroanMap:
+        world = DroanMap(rig, MAPPING)
+        for stamp, pose, mask in zip(stamps, poses, masks, strict=True):
+            if explain:
+                mask = unexplained_wire_mask(mask, camera, pose, obstacles, PARAMS)
+            world.insert(float(stamp), pose, np.zeros(camera.shape, np.float32), mask)
+        return world
+
+    slab_only = droan(explain=False)
+    with_catenary = collision_map(
+        droan(explain=True), fits, PARAMS, MAPPING.robot_radius_m, MAPPING.occupancy_threshold
+    )
+    return {
+        "camera": camera,
+        "poses": poses,
+        "masks": masks,
+        "fits": fits,
+        "obstacles": obstacles,
+        "dense": dense,
+        "slab_only": slab_only,
+        "with_catenary": with_catenary,
+    }
+
+
+def test_the_approach_gives_one_confident_wire(approach) -> None:
+    (fit,) = approach["fits"]
+    assert fit.confident
+    assert np.linalg.norm(fit.theta[:3] - THETA_TRUE[:3]) < 0.3
+    assert len(approach["obstacles"]) == 1
+
+
+def test_explained_pixels_leave_the_slab_and_the_tube_still_holds_the_wire(approach) -> None:
+    camera, pose, mask = approach["camera"], approach["poses"][-1], approach["masks"][-1]
+    left = unexplained_wire_mask(mask, camera, pose, approach["obstacles"], PARAMS)
+    assert left.sum() < 0.02 * mask.sum()
+    other = np.zeros_like(mask)
+    other[40:42, :] = True  # an unrelated wire the catenary does not explain
+    assert unexplained_wire_mask(other, camera, pose, approach["obstacles"], PARAMS).sum() == (
+        other.sum()
+    )
+    # Safety: the true wire (within the observed extent) is in collision in the new map.
+    (fit,) = approach["fits"]
+    lo, hi = fit.extent_x_cat_m
+    truth = catenary_points_ned_m(THETA_TRUE, np.linspace(lo + 0.2, hi - 0.2, 50))
+    assert approach["with_catenary"].query(truth).collision.all()
+
+
+def fly(occupancy_map, duration_s: float = 40.0) -> tuple[PlannerState, np.ndarray]:
+    """A kinematic vehicle following the planner and tracker on a static map."""
+    library = generate_library(SETTINGS.planning)
+    planner = LocalPlanner(SETTINGS.planning, library)
+    tracker = PathTracker(SETTINGS.planning)
+    planner.set_goal(GOAL, 0.0)
+    position, velocity, yaw, now_s = START.copy(), np.zeros(3), 0.0, 0.0
+    path = [position.copy()]
+    state = PlannerState.IDLE
+    while now_s < duration_s:
+        output = planner.step(
+            now_s, VehicleState(now_s, position, velocity, yaw), velocity, occupancy_map
+        )
+        state = output.state
+        if state is PlannerState.ARRIVED:
+            break
+        for _ in range(2):  # tracker at 20 Hz, planner at 10 Hz
+            setpoint = tracker.setpoint(
+                now_s, VehicleState(now_s, position, velocity, yaw), output.reference, GOAL
+            )
+            velocity = setpoint.velocity_ned_mps
+            position = position + 0.05 * velocity
+            yaw = setpoint.yaw_rad
+            now_s += 0.05
+            path.append(position.copy())
+    return state, np.array(path)
+
+
+def test_the_catenary_frees_the_flight_line_and_shortens_the_flight(approach) -> None:
+    line = np.linspace(START, GOAL, 41)
+    blocked_slab = approach["slab_only"].query(line).collision.mean()
+    blocked_catenary = approach["with_catenary"].query(line).collision.mean()
+    assert blocked_slab > 0.3 and blocked_catenary == 0.0
+
+    slab_state, slab_path = fly(approach["slab_only"])
+    cat_state, cat_path = fly(approach["with_catenary"])
+    assert cat_state is PlannerState.ARRIVED
+    cat_length = np.linalg.norm(np.diff(cat_path, axis=0), axis=1).sum()
+    assert cat_length < 1.1 * np.linalg.norm(GOAL - START)
+    clearance, _, _ = distance_to_polyline_m(cat_path, approach["dense"])
+    assert clearance.min() > MAPPING.robot_radius_m
+    # With the 4-20 m slab alone the start lies inside the wire evidence: no way to the goal.
+    assert slab_state is not PlannerState.ARRIVED
+    assert np.linalg.norm(slab_path[-1] - GOAL) > np.linalg.norm(cat_path[-1] - GOAL) + 5.0
+
+
+def test_the_mapper_keeps_keyframes_and_serves_the_same_pipeline(approach) -> None:
+    camera = approach["camera"]
+    mapper = CatenaryMapper(camera, PARAMS, MAPPING)
+    poses, masks = approach["poses"], approach["masks"]
+    kept = [
+        mapper.add_frame(0.2 * i, pose, mask)
+        for i, (pose, mask) in enumerate(zip(poses, masks, strict=True))
+    ]
+    assert all(kept)  # 0.6 m apart: every frame is a keyframe
+    assert not mapper.add_frame(9.0, poses[-1], masks[-1])  # no motion: not a keyframe
+    assert not mapper.add_frame(9.0, poses[0], np.zeros_like(masks[0]))  # no wire: nothing
+    assert len(mapper) == len(poses)
+    (fit,) = mapper.fits()
+    assert fit.confident and mapper.fits()[0] is fit  # cached until the next keyframe
+    assert mapper.mask_for_droan(poses[-1], masks[-1]).sum() < 0.02 * masks[-1].sum()
+    line = np.linspace(START, GOAL, 41)
+    assert not mapper.collision_map(EmptyMap()).query(line).collision.any()
