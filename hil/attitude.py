@@ -1,7 +1,7 @@
 """Quaternion helpers for attitudes. Quaternions are (w, x, y, z), Hamilton, body FRD -> world NED.
 
-`rotation_from_quaternion(q) @ v_frd` gives the NED vector; Euler angles are the aerospace
-Z-Y-X (yaw, pitch, roll) sequence PX4 and MAVLink use.
+`mapping.pose.rotation_from_quaternion(q) @ v_frd` gives the NED vector; Euler angles are the
+aerospace Z-Y-X (yaw, pitch, roll) sequence PX4 and MAVLink use.
 """
 
 from __future__ import annotations
@@ -36,45 +36,6 @@ def quaternion_from_rotation_vector(rotvec_rad: np.ndarray) -> np.ndarray:
     axis = rotvec_rad / angle
     s = np.sin(0.5 * angle)
     return np.array([np.cos(0.5 * angle), axis[0] * s, axis[1] * s, axis[2] * s])
-
-
-def rotation_from_quaternion(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation matrix R of the unit quaternion q: v_ned = R @ v_frd."""
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def quaternion_from_rotation(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w >= 0) of a (3, 3) rotation matrix (Shepperd's method)."""
-    trace = r[0, 0] + r[1, 1] + r[2, 2]
-    if trace > 0.0:
-        s = 2.0 * np.sqrt(trace + 1.0)
-        q = np.array(
-            [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-        )
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = np.array(
-            [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-        )
-    elif r[1, 1] > r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        q = np.array(
-            [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
-        )
-    else:
-        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        q = np.array(
-            [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-        )
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0.0 else -q
 
 
 def quaternion_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:

@@ -29,7 +29,6 @@ from hil.attitude import (
     quaternion_from_euler,
     quaternion_from_rotation_vector,
     quaternion_multiply,
-    rotation_from_quaternion,
 )
 from hil.params import VehicleSimParams
 from hil.px4_controller import (
@@ -38,6 +37,7 @@ from hil.px4_controller import (
     PositionController,
     TrajectorySetpoint,
 )
+from mapping.pose import rotation_from_quaternion
 
 
 @dataclass(frozen=True)

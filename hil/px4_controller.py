@@ -15,12 +15,11 @@ import numpy as np
 
 from hil.attitude import (
     quaternion_conjugate,
-    quaternion_from_rotation,
     quaternion_multiply,
-    rotation_from_quaternion,
     wrap_pi,
 )
 from hil.params import VehicleSimParams
+from mapping.pose import quaternion_from_rotation, rotation_from_quaternion
 
 GRAVITY_MPS2 = 9.80665
 

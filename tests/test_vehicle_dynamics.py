@@ -10,12 +10,11 @@ import pytest
 from hil.attitude import (
     euler_from_quaternion,
     quaternion_from_euler,
-    quaternion_from_rotation,
-    rotation_from_quaternion,
 )
 from hil.multirotor import Multirotor, VehicleState
 from hil.params import VehicleSimParams
 from hil.px4_controller import GRAVITY_MPS2, PositionController, TrajectorySetpoint
+from mapping.pose import quaternion_from_rotation, rotation_from_quaternion
 
 DT_S = 0.02
 
