@@ -14,6 +14,7 @@ from companion import (
     cli_mapping,
     cli_perception,
     cli_planning,
+    cli_service,
     cli_training,
     cli_vehicle,
 )
@@ -36,6 +37,7 @@ app.add_typer(bench_app, name="bench")
 
 for _module in (
     cli_config,
+    cli_service,
     cli_vehicle,
     cli_flight,
     cli_perception,

@@ -15,6 +15,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
+from companion.service_params import ServiceParams
 from hil.camera_params import CameraSimParams
 from hil.params import VehicleSimParams
 from mapping.catenary_params import CatenaryParams
@@ -122,6 +123,7 @@ class Settings(BaseSettings):
     )
 
     link: LinkParams = Field(default_factory=LinkParams)
+    service: ServiceParams = Field(default_factory=ServiceParams)
     perception: PerceptionParams = Field(default_factory=PerceptionParams)
     mapping: MappingParams = Field(default_factory=MappingParams)
     catenary: CatenaryParams = Field(default_factory=CatenaryParams)

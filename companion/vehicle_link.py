@@ -20,6 +20,7 @@ import contextlib
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass
 from enum import Enum
@@ -68,6 +69,9 @@ def route_mavsdk_logs() -> None:
 
     log_subscribe(forward)
     _mavsdk_log_routed = True
+
+
+EVENT_HISTORY = 1000  # LinkEvents kept in `VehicleLink.events`
 
 
 class LinkError(RuntimeError):
@@ -130,7 +134,8 @@ class VehicleLink:
         self.watchdog = SetpointWatchdog(
             params.setpoint_max_age_s, params.brake_timeout_s, params.brake_speed_mps
         )
-        self.events: list[LinkEvent] = []
+        # Bounded: the service runs for hours; the newest events are the ones worth keeping.
+        self.events: deque[LinkEvent] = deque(maxlen=EVENT_HISTORY)
         self.state = LinkState.DISCONNECTED
         self.setpoints_sent = 0
         self._cache = TelemetryCache()

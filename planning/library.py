@@ -140,11 +140,14 @@ def _jerk_limited_accel(
 ) -> np.ndarray:
     """Next acceleration driving `error` (target - value) to 0 without overshoot.
 
-    The desired acceleration sign(e) * min(a_max, sqrt(2 j_max |e|)) is the fastest that can
-    still be ramped down to zero at jerk j_max before the error closes; the acceleration
-    moves towards it by at most j_max * dt per step.
+    The desired acceleration a = sign(e) * min(a_max, sqrt((j dt)^2 + 2 j |e|) - j dt) is the
+    fastest that, held for this step (a dt) and then ramped down to zero at jerk j = j_max
+    (a^2 / 2j), still closes the error without crossing it; the acceleration moves towards it
+    by at most j_max * dt per step. dt_s = inf: no ramp, the desired acceleration of dt -> 0.
     """
-    desired = np.sign(error) * np.minimum(accel_max, np.sqrt(2.0 * jerk_max * np.abs(error)))
+    lag = jerk_max * dt_s if np.isfinite(dt_s) else np.zeros_like(jerk_max)
+    reach = np.sqrt(lag * lag + 2.0 * jerk_max * np.abs(error)) - lag
+    desired = np.sign(error) * np.minimum(accel_max, reach)
     return accel + np.clip(desired - accel, -jerk_max * dt_s, jerk_max * dt_s)
 
 

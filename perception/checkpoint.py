@@ -1,0 +1,128 @@
+"""Model checkpoints: architecture name, input mode, normalisation, weights, training metadata.
+
+A checkpoint is a ``torch.save`` dict of plain types (loadable with ``weights_only=True``):
+``format``, ``arch``, ``input_mode``, ``in_channels``, ``normalisation`` (see
+``perception.inputs.NORMALISATION``), ``state_dict``, ``training`` (command, steps, seed,
+losses, ...), ``metrics`` (held-out evaluation) and, for resumable training checkpoints only,
+``optimizer_state``. The shipped default lives in ``perception/weights/`` with its metrics in a
+JSON file of the same stem beside it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from perception.inputs import NORMALISATION, input_channels
+from perception.zoo import DEFAULT_MODEL, build_model
+
+FORMAT = "wireavoid-checkpoint-1"
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+
+
+def default_checkpoint_path() -> Path:
+    """Path of the shipped default model: k32-k32-d1-d2-d4-d8-d16-d1-k2, RGB, synthetic-trained."""
+    return WEIGHTS_DIR / f"{DEFAULT_MODEL}_rgb.pt"
+
+
+def metrics_path(checkpoint_path: str | os.PathLike) -> Path:
+    """The JSON file beside a checkpoint that records its metrics and training command."""
+    return Path(checkpoint_path).with_suffix(".json")
+
+
+def save_checkpoint(
+    path: str | os.PathLike,
+    model: nn.Module,
+    arch: str,
+    input_mode: str,
+    training: dict[str, Any] | None = None,
+    metrics: dict[str, Any] | None = None,
+    optimizer: torch.optim.Optimizer | None = None,
+) -> Path:
+    """Write a checkpoint atomically (temp file + rename) and return its path.
+
+    Weights are stored as fp32 on CPU whatever device/dtype the model trained in; DDP's
+    ``module.`` prefixes are stripped. With ``optimizer`` the checkpoint can be resumed.
+    """
+    module = getattr(model, "module", model)
+    state = {k: v.detach().to("cpu", torch.float32) for k, v in module.state_dict().items()}
+    payload: dict[str, Any] = {
+        "format": FORMAT,
+        "arch": arch,
+        "input_mode": input_mode,
+        "in_channels": input_channels(input_mode),
+        "normalisation": {k: v[: input_channels(input_mode)] for k, v in NORMALISATION.items()},
+        "state_dict": state,
+        "training": training or {},
+        "metrics": metrics or {},
+    }
+    if optimizer is not None:
+        payload["optimizer_state"] = optimizer.state_dict()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(path)
+    return path
+
+
+def read_checkpoint(path: str | os.PathLike) -> dict[str, Any]:
+    """The raw checkpoint dict (CPU tensors); ValueError if the file is not one of ours."""
+    payload = torch.load(Path(path), map_location="cpu", weights_only=True)
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise ValueError(f"{path} is not a {FORMAT} checkpoint")
+    return payload
+
+
+def load_checkpoint(path: str | os.PathLike | None = None) -> tuple[nn.Module, dict[str, Any]]:
+    """(model in eval mode on CPU, metadata) of a checkpoint, by default the shipped one.
+
+    The metadata holds everything but the weights and optimizer state: ``arch``,
+    ``input_mode``, ``in_channels``, ``normalisation``, ``training``, ``metrics``, ``path``.
+    """
+    path = Path(path) if path is not None else default_checkpoint_path()
+    payload = read_checkpoint(path)
+    model = build_model(payload["arch"], payload["in_channels"])
+    model.load_state_dict(payload["state_dict"])
+    model.eval()
+    meta = {k: v for k, v in payload.items() if k not in ("state_dict", "optimizer_state")}
+    meta["path"] = str(path)
+    return model, meta
+
+
+def write_metrics_json(checkpoint_path: str | os.PathLike, record: dict[str, Any]) -> Path:
+    """Write the human-readable record (metrics, command, data) beside a checkpoint."""
+    out = metrics_path(checkpoint_path)
+    out.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
+    return out
+
+
+def ship_checkpoint(
+    src: str | os.PathLike, dst: str | os.PathLike, extra: dict[str, Any] | None = None
+) -> Path:
+    """Copy a trained checkpoint without its optimiser state (the form committed to weights/),
+    and write its metrics JSON beside it: metrics, training command and settings, `extra`."""
+    payload = read_checkpoint(src)
+    model = build_model(payload["arch"], payload["in_channels"])
+    model.load_state_dict(payload["state_dict"])
+    training = payload["training"]
+    path = save_checkpoint(
+        dst, model, payload["arch"], payload["input_mode"], training, payload["metrics"]
+    )
+    record = {
+        "checkpoint": path.name,
+        "arch": payload["arch"],
+        "input_mode": payload["input_mode"],
+        "command": training.get("command", ""),
+        "training": {k: v for k, v in training.items() if k != "loss_history"},
+        "final_loss": training["loss_history"][-1][1] if training.get("loss_history") else None,
+        "metrics": payload["metrics"],
+        **(extra or {}),
+    }
+    write_metrics_json(path, record)
+    return path

@@ -1,0 +1,88 @@
+"""Candamo baseline (thesis 2.4.3) and the 4.4.1 post-processing it shares code with."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from perception.baseline import candamo_scores, filtered_edges, rasterised_lines, window_lines
+from perception.metrics import evaluate_predictions
+from perception.params import PerceptionParams
+from perception.postprocess import remove_small_components, wire_mask
+
+
+def test_small_8_connected_components_are_removed():
+    binary = np.zeros((10, 12), bool)
+    binary[1, 1:4] = True  # 3 px
+    for i in range(5):  # a 5-px diagonal chain: one component only with 8-connectivity
+        binary[4 + i, 2 + i] = True
+    binary[2:5, 9:12] = True  # 9 px block
+    kept = remove_small_components(binary, 5)
+    assert kept[4:9, 2:7].trace() == 5 and kept[2:5, 9:12].all()
+    assert not kept[1].any()
+    np.testing.assert_array_equal(remove_small_components(binary, 0), binary)
+    assert not remove_small_components(binary, 10).any()
+
+
+def test_wire_mask_thresholds_at_095_and_drops_speckles():
+    prob = np.zeros((20, 30), np.float32)
+    prob[5, :] = 0.95  # a 30-px wire exactly at the threshold: kept ("< 0.95" is removed)
+    prob[10, :] = 0.949  # just below
+    prob[15, 3:6] = 1.0  # 3-px speckle
+    mask = wire_mask(prob, PerceptionParams())
+    expected = np.zeros_like(mask)
+    expected[5] = True
+    np.testing.assert_array_equal(mask, expected)
+    low = wire_mask(prob, PerceptionParams(confidence_threshold=0.9, min_wire_component_px=0))
+    assert low[10].all() and low[15, 3:6].all()
+
+
+def test_rasterised_lines_give_one_score_level_per_thickness():
+    lines = np.array([[10.0, np.pi / 2]], np.float32)  # y = 10, horizontal
+    scores = rasterised_lines((21, 30), lines, max_thickness_px=5)
+    assert scores[10].min() == pytest.approx(1.0)  # covered by the 1-px line
+    assert np.count_nonzero(scores[:, 15] >= 1.0) == 1
+    # thresholding at level (T + 1 - t) / T reproduces the t-px-thick rasterisation
+    canvas = np.zeros((21, 30), np.uint8)
+    cv2.line(canvas, (-100, 10), (100, 10), 1, 3)
+    np.testing.assert_array_equal(scores >= 0.6 - 1e-6, canvas > 0)
+    levels = np.unique(scores)
+    np.testing.assert_allclose(levels, np.round(levels * 5) / 5, atol=1e-6)
+
+
+def wire_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """RGB image: smooth noisy gradient with a thin dark straight wire, and its 1-px mask."""
+    rng = np.random.default_rng(seed)
+    h, w = 240, 320
+    grad = np.linspace(120, 200, w)[None, :, None] * np.ones((h, 1, 3))
+    image = np.clip(grad + rng.normal(0, 4, (h, w, 3)), 0, 255).astype(np.uint8)
+    mask = np.zeros((h, w), np.uint8)
+    cv2.line(mask, (0, 60), (319, 170), 1, 1)
+    image[mask > 0] = 40
+    return image, mask
+
+
+def test_baseline_finds_a_straight_wire_in_every_window_it_crosses():
+    image, mask = wire_scene()
+    params = PerceptionParams()
+    near_edges = cv2.dilate(filtered_edges(image, params).astype(np.uint8), np.ones((3, 3)))
+    assert near_edges[mask > 0].mean() > 0.9
+    scores = candamo_scores(image, params)
+    assert scores.shape == mask.shape and scores.dtype == np.float32
+    relaxed = evaluate_predictions([scores], [mask], tolerance_px=2)
+    assert relaxed.ods_f1 > 0.6
+    # noise-only edges are removed by the 30-px component filter: nothing far from the wire
+    far = cv2.dilate(mask, np.ones((15, 15), np.uint8)) == 0
+    assert scores[far].max() == 0.0
+
+
+def test_baseline_on_a_flat_image_and_single_window():
+    flat = np.full((64, 64, 3), 128, np.uint8)
+    assert not candamo_scores(flat).any()
+    image, _ = wire_scene(1)
+    one_window = PerceptionParams(baseline_windows=1)
+    lines = window_lines(filtered_edges(image, one_window), one_window)
+    assert 1 <= len(lines) <= one_window.baseline_max_lines_per_window
+    # the wire direction: y = 60 + 110/319 x -> normal angle theta = atan2(319, -110) ~ 109 deg
+    assert np.degrees(lines[0, 1]) == pytest.approx(np.degrees(np.arctan2(319, -110)), abs=2)

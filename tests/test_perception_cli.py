@@ -1,0 +1,137 @@
+"""`wireavoid detect`, `wireavoid evaluate` and `wireavoid bench perception` end to end."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from test_perception_segmenter import dark_line_image, darkness_model
+from typer.testing import CliRunner
+
+from companion.cli import app
+from companion.cli_perception import image_mask_pairs
+from perception.checkpoint import save_checkpoint
+from perception.segmenter import WireSegmenter
+
+runner = CliRunner()
+
+
+@pytest.fixture()
+def checkpoint(tmp_path):
+    return save_checkpoint(tmp_path / "dark.pt", darkness_model(), "k2", "rgb")
+
+
+def test_detect_writes_prob_mask_overlay_and_reports_bad_files(tmp_path, checkpoint):
+    src, out = tmp_path / "in", tmp_path / "out"
+    src.mkdir()
+    cv2.imwrite(str(src / "a.png"), dark_line_image())
+    cv2.imwrite(str(src / "b.jpg"), dark_line_image(48, 64, row=10))
+    (src / "broken.png").write_bytes(b"not an image")
+    (src / "notes.txt").write_text("ignored")
+    result = runner.invoke(
+        app,
+        ["detect", str(src), "--out", str(out), "--model", str(checkpoint), "--runtime", "torch"],
+    )
+    assert result.exit_code == 1, result.output
+    assert "cannot read image" in result.output and "broken.png" in result.output
+    assert "2/3 images" in result.output
+    prob16 = cv2.imread(str(out / "a_prob.png"), cv2.IMREAD_UNCHANGED)
+    assert prob16.dtype == np.uint16 and prob16.shape == (60, 80)
+    expected = WireSegmenter.load(checkpoint, runtime="torch").probability(dark_line_image())
+    np.testing.assert_allclose(prob16 / 65535.0, expected, atol=1.0 / 65535)
+    mask = cv2.imread(str(out / "a_mask.png"), cv2.IMREAD_UNCHANGED)
+    assert set(np.unique(mask)) == {0, 255} and (mask[30:32] == 255).all() and not mask[5, 5]
+    overlay = cv2.imread(str(out / "b_overlay.jpg"))
+    assert overlay.shape == (48, 64, 3) and overlay[10, 30, 2] > 200  # red on the wire
+    assert not (out / "broken_prob.png").exists()
+
+
+def write_dataset(root, layout: str, n: int = 3) -> None:
+    """Dark-wire images with exact masks in the images/ + masks/ or NAME_mask.png layout."""
+    for i in range(n):
+        image = dark_line_image(row=10 + 12 * i)
+        mask = (image[..., 0] == 0).astype(np.uint8) * 255
+        mask[5:7, 5:7] = 0  # the speck is not a wire
+        if layout == "split":
+            (root / "images").mkdir(parents=True, exist_ok=True)
+            (root / "masks").mkdir(exist_ok=True)
+            cv2.imwrite(str(root / "images" / f"{i:03d}.jpg"), image)
+            cv2.imwrite(str(root / "masks" / f"{i:03d}.png"), mask)
+        else:
+            root.mkdir(exist_ok=True)
+            cv2.imwrite(str(root / f"{i:03d}.png"), image)
+            cv2.imwrite(str(root / f"{i:03d}_mask.png"), mask)
+
+
+def test_dataset_layouts(tmp_path):
+    write_dataset(tmp_path / "split", "split")
+    write_dataset(tmp_path / "flat", "flat")
+    (tmp_path / "flat" / "orphan.png").write_bytes(b"x")
+    pairs, unmatched = image_mask_pairs(tmp_path / "split")
+    assert [(p.name, m.name) for p, m in pairs] == [
+        (f"{i:03d}.jpg", f"{i:03d}.png") for i in range(3)
+    ]
+    pairs, unmatched = image_mask_pairs(tmp_path / "flat")
+    assert [m.name for _, m in pairs] == [f"{i:03d}_mask.png" for i in range(3)]
+    assert [u.name for u in unmatched] == ["orphan.png"]
+
+
+def test_evaluate_prints_the_table_and_saves_the_pr_curve(tmp_path, checkpoint):
+    data, out = tmp_path / "data", tmp_path / "eval"
+    write_dataset(data, "split")
+    result = runner.invoke(
+        app,
+        ["evaluate", str(data), "--model", str(checkpoint), "--runtime", "torch", "--baseline",
+         "--tolerance-px", "1", "--out", str(out)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "Candamo baseline" in result.output and "ods_f1" in result.output
+    record = json.loads((out / "metrics.json").read_text())
+    model_row, baseline_row = record["rows"]
+    assert model_row["images"] == 3 and model_row["tolerance_px"] == 1
+    # the darkness model scores the speck as wire too, but far below the wire's confidence
+    assert model_row["ap"] > 0.95 and model_row["ods_f1"] > 0.95
+    assert 0.0 <= baseline_row["ods_f1"] <= 1.0
+    png = (out / "pr_curve.png").read_bytes()
+    assert png.startswith(b"\x89PNG")
+
+
+def test_evaluate_rejects_a_folder_without_pairs(tmp_path, checkpoint):
+    (tmp_path / "empty").mkdir()
+    result = runner.invoke(app, ["evaluate", str(tmp_path / "empty"), "--model", str(checkpoint)])
+    assert result.exit_code != 0
+    assert "no image/mask pairs" in result.output
+
+
+def test_bench_perception_json(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    checkpoint = save_checkpoint(tmp_path / "small.pt", darkness_model(), "k2", "rgb")
+    result = runner.invoke(
+        app, ["bench", "perception", "--json", "--model", str(checkpoint), "--repeats", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output[result.output.index("{") :])
+    assert report["default_model"] == "k2"
+    assert report["default_runtime"] in report["runtimes"]
+    assert report["latency_ms_240x320"] > 0 and report["ratio_to_fp32_peak_240x320"] > 0
+    assert report["gflop_per_frame"]["480x640"] == pytest.approx(
+        4 * report["gflop_per_frame"]["240x320"], rel=1e-4
+    )
+    for per_size in report["runtimes"].values():
+        assert set(per_size) == {"240x320", "480x640"}
+        row = per_size["240x320"]
+        assert row["gflops"] == pytest.approx(
+            report["gflop_per_frame"]["240x320"] / row["latency_ms"] * 1e3, rel=0.02
+        )
+
+
+def test_unknown_runtime_and_missing_input_are_usage_errors(tmp_path, checkpoint):
+    cv2.imwrite(str(tmp_path / "a.png"), dark_line_image())
+    args = ["detect", str(tmp_path / "a.png"), "--out", str(tmp_path / "o")]
+    result = runner.invoke(app, [*args, "--model", str(checkpoint), "--runtime", "tflite"])
+    assert result.exit_code == 2 and "unknown runtime" in result.output
+    missing = ["detect", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]
+    result = runner.invoke(app, [*missing, "--model", str(checkpoint)])
+    assert result.exit_code == 2 and "neither an image file nor a folder" in result.output

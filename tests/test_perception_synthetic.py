@@ -1,0 +1,176 @@
+"""Synthetic wire generator (thesis 2.3.2): geometry, masks, determinism, distractors."""
+
+import cv2
+import numpy as np
+import pytest
+
+from perception.backgrounds import Horizon, add_distractors
+from perception.params import SyntheticParams
+from perception.synthetic import (
+    Camera,
+    SyntheticWireDataset,
+    WireBundle,
+    catenary_height_m,
+    composite_wires,
+    horizon_of,
+    label_mask,
+    rotation_world_from_body,
+    synthetic_sample,
+    wire_segments,
+    with_local_contrast,
+    write_dataset,
+)
+
+R_CAM_FROM_BODY = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+
+
+def level_camera(w=160, h=120, altitude_m=10.0, pitch_rad=0.0, roll_rad=0.0):
+    r_wb = rotation_world_from_body(roll_rad, pitch_rad, 0.0)
+    return Camera(
+        100.0, 100.0, w / 2, h / 2, w, h, np.array([0, 0, -altitude_m]), R_CAM_FROM_BODY @ r_wb.T
+    )
+
+
+def east_wire(distance_m=20.0, height_m=10.0, diameter_m=0.4, floor_px=0.3, material="dark"):
+    """Straight wire running east at `distance_m` north of the camera."""
+    y = np.linspace(-200, 200, 400)
+    line = np.stack([np.full_like(y, distance_m), y, np.full_like(y, -height_m)], 1)
+    return WireBundle((line,), diameter_m, floor_px, material)
+
+
+def render(bundle, cam, seed=0):
+    grey = np.full((cam.height_px, cam.width_px, 3), 0.8, np.float32)
+    return composite_wires(np.random.default_rng(seed), grey, [bundle], cam, SyntheticParams())
+
+
+def test_catenary_sag_matches_closed_form():
+    span, a = 100.0, 500.0
+    x = np.array([0.0, span / 2, span])
+    z = catenary_height_m(x, a, span / 2)
+    assert z[0] == pytest.approx(z[2])
+    assert z[0] - z[1] == pytest.approx(a * (np.cosh(span / (2 * a)) - 1))
+
+
+def test_horizon_of_level_and_rolled_camera():
+    level = horizon_of(level_camera())
+    assert level.v_center_px == pytest.approx(60.0, abs=1e-3) and level.slope == pytest.approx(
+        0, abs=1e-6
+    )
+    nose_up = horizon_of(level_camera(pitch_rad=0.1))
+    assert nose_up.v_center_px == pytest.approx(60 + 100 * np.tan(0.1), abs=1e-2)
+    rolled = horizon_of(level_camera(roll_rad=0.2))
+    assert abs(rolled.slope) == pytest.approx(np.tan(0.2), abs=1e-3)
+
+
+def test_thick_wire_mask_matches_its_pixels():
+    cam = level_camera()
+    image, mask = render(east_wire(diameter_m=0.8), cam)  # 0.8 m at 20 m with fx 100: 4 px
+    rows = np.nonzero(mask.any(axis=1))[0]
+    assert mask.any(axis=0).all()  # labelled across the whole image
+    assert 3 <= len(rows) <= 5 and abs(rows.mean() - cam.cy_px) <= 1.0
+    darkening = 0.8 - image.mean(axis=2)
+    assert (darkening[mask > 0] > 0.2).mean() > 0.95  # labelled pixels show the wire
+    assert (darkening[mask == 0] < 0.6).all()  # strongly covered pixels are labelled
+
+
+def test_subpixel_wire_is_labelled_one_pixel_wide_and_drawn_faint():
+    cam = level_camera()
+    image, mask = render(east_wire(diameter_m=0.02, floor_px=0.35), cam)  # 0.1 px -> 0.35 floor
+    per_column = mask.sum(axis=0)
+    assert (per_column >= 1).all() and (per_column <= 2).all()
+    darkening = 0.8 - image.mean(axis=2)
+    column_max = darkening.max(axis=0)
+    assert (column_max > 0.05).all() and (column_max < 0.6).all()  # visible but partial coverage
+    labelled = darkening[mask > 0]
+    assert (labelled > 0.02).all()
+
+
+def test_wire_width_follows_depth():
+    cam = level_camera()
+    _, near_w, _ = wire_segments(east_wire(distance_m=10, diameter_m=0.1, floor_px=0.1), cam, 20)
+    _, far_w, _ = wire_segments(east_wire(distance_m=40, diameter_m=0.1, floor_px=0.1), cam, 20)
+    assert near_w.max() == pytest.approx(1.0, rel=0.02)  # fx * D / z = 100 * 0.1 / 10
+    assert far_w.max() == pytest.approx(0.25, rel=0.02)
+
+
+def test_poles_and_distractors_are_never_labelled():
+    cam = level_camera()
+    pole = (np.array([20.0, 5.0, -14.0]), np.array([20.0, 5.0, 0.0]), 0.6)
+    bundle = east_wire(diameter_m=0.05)
+    with_pole = WireBundle(bundle.conductors_ned_m, 0.05, 0.3, "dark", (pole,))
+    image, mask = render(with_pole, cam)
+    segments, widths, _ = wire_segments(bundle, cam, 12)
+    assert np.array_equal(mask, label_mask(segments, widths, cam.height_px, cam.width_px))
+    pole_column = round(cam.cx_px + 100 * 5 / 20)
+    top_v = round(cam.cy_px - 100 * 4 / 20)  # pole top 4 m above the camera, 20 m ahead
+    assert (0.8 - image[top_v + 2 : top_v + 16, pole_column].mean(axis=1) > 0.1).all()
+    assert not mask[: int(cam.cy_px) - 3, pole_column].any()
+    assert not mask[int(cam.cy_px) + 3 :, pole_column].any()
+
+
+def test_images_without_wires_have_empty_masks_despite_straight_edges():
+    params = SyntheticParams(no_wire_probability=1.0)
+    edges = 0
+    for i in range(6):
+        image, mask = synthetic_sample(5, i, 96, 128, params)
+        assert not mask.any()
+        edges += int((cv2.Canny(image, 50, 150) > 0).sum())
+    assert edges > 0
+
+
+def test_distractors_draw_strong_straight_edges():
+    rng = np.random.default_rng(3)
+    drawn = 0
+    for _ in range(8):
+        img = np.full((96, 128, 3), 0.5, np.float32)
+        add_distractors(rng, img, Horizon(40.0, 0.0))
+        drawn += int((np.abs(img - 0.5).max(axis=2) > 0.1).sum())
+    assert drawn > 500
+
+
+def test_samples_are_deterministic_and_varied():
+    a_img, a_mask = synthetic_sample(11, 4, 72, 96)
+    b_img, b_mask = synthetic_sample(11, 4, 72, 96)
+    c_img, _ = synthetic_sample(11, 5, 72, 96)
+    assert np.array_equal(a_img, b_img) and np.array_equal(a_mask, b_mask)
+    assert not np.array_equal(a_img, c_img)
+    assert a_img.dtype == np.uint8 and a_img.shape == (72, 96, 3)
+    assert a_mask.dtype == np.uint8 and set(np.unique(a_mask)) <= {0, 1}
+
+
+def test_most_samples_have_thin_wires():
+    masks = [synthetic_sample(2, i, 96, 128)[1] for i in range(24)]
+    with_wires = [m for m in masks if m.any()]
+    assert len(with_wires) >= 16
+    fraction = np.mean([m.mean() for m in with_wires])
+    assert 0.001 < fraction < 0.2  # wires are a small share of the pixels, as in USF (4.9 %)
+
+
+def test_dataset_items_and_rgble_channels():
+    item = SyntheticWireDataset(0, 10, 48, 64, "rgble")[3]
+    x, y = item
+    assert tuple(x.shape) == (5, 48, 64) and tuple(y.shape) == (48, 64)
+    assert y.dtype.is_floating_point is False and set(y.unique().tolist()) <= {0, 1}
+
+
+def test_write_dataset_round_trip(tmp_path):
+    out = write_dataset(tmp_path / "ds", 3, 9, 40, 56)
+    image, mask = synthetic_sample(9, 2, 40, 56)
+    read_image = cv2.imread(str(out / "images" / "000002.png"))[..., ::-1]
+    read_mask = cv2.imread(str(out / "masks" / "000002.png"), cv2.IMREAD_GRAYSCALE)
+    assert np.array_equal(read_image, image)
+    assert np.array_equal(read_mask > 0, mask > 0)
+    assert (out / "synth.json").exists()
+
+
+def test_wire_colour_keeps_a_least_contrast_to_its_background():
+    background = np.full((20, 20, 3), 0.4, np.float32)
+    background[:, 10:] = 0.95  # bright right half: no room to get brighter
+    same = background.copy()
+    out = with_local_contrast(same, background, 0.2)
+    weights = np.array([0.299, 0.587, 0.114])
+    diff = np.abs((out - background) @ weights)
+    assert (diff[:, :7] >= 0.2 - 1e-5).all() and (diff[:, 13:] >= 0.2 - 1e-5).all()
+    assert (out[:, 13:] < background[:, 13:]).all()  # pushed darker where it cannot be brighter
+    dark = np.full_like(background, 0.0)
+    assert np.array_equal(with_local_contrast(dark, background, 0.2)[:, :7], dark[:, :7])

@@ -1,0 +1,257 @@
+"""The planner against synthetic occupancy: around, over, inside, stop + recovery, rewind, goals.
+
+A kinematic vehicle follows the tracker's setpoints (planner at 10 Hz, setpoints at 20 Hz) and
+the map sees only what the vehicle's camera looked at (`SyntheticOccupancyMap` views), so
+unknown space is really unknown. Collisions are judged on the ground-truth geometry.
+"""
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from planning.library import generate_library
+from planning.params import PlanningParams
+from planning.planner import LocalPlanner
+from planning.synthetic_occupancy import (
+    Box,
+    SyntheticOccupancyMap,
+    box_canyon,
+    corridor,
+    wall,
+    wire_across,
+)
+from planning.tracker import PathTracker
+from planning.types import PlannerOutput, PlannerState, Setpoint, SetpointKind, VehicleState
+
+PARAMS = PlanningParams()
+LIBRARY = generate_library(PARAMS)
+START = np.array([0.0, 0.0, -3.0])
+GOAL = np.array([20.0, 0.0, -3.0])
+ROBOT_RADIUS_M = 0.3  # ground-truth clearance every flight must keep (maps inflate by 0.5)
+SETPOINT_DT_S = 0.05
+
+
+@dataclass
+class Flight:
+    path: np.ndarray  # (N, 3) positions at 20 Hz
+    outputs: list[PlannerOutput]  # one per planning cycle (10 Hz)
+    setpoints: list[Setpoint]
+    planner: LocalPlanner
+
+    @property
+    def states(self) -> list[PlannerState]:
+        return [o.state for o in self.outputs]
+
+    def first(self, state: PlannerState) -> int:
+        return self.states.index(state)
+
+
+def fly(
+    world: SyntheticOccupancyMap,
+    goal: np.ndarray = GOAL,
+    start: np.ndarray = START,
+    duration_s: float = 40.0,
+    params: PlanningParams = PARAMS,
+    stop_at: Iterable[PlannerState] = (PlannerState.ARRIVED, PlannerState.UNREACHABLE),
+) -> Flight:
+    """Fly until a state in `stop_at` held for a cycle, or `duration_s` of simulated time."""
+    planner, tracker = LocalPlanner(params, LIBRARY), PathTracker(params)
+    planner.set_goal(goal, 0.0)
+    position, velocity, yaw, now_s = np.array(start, float), np.zeros(3), 0.0, 0.0
+    path, outputs, setpoints = [position.copy()], [], []
+    while now_s < duration_s:
+        world.add_view(position, yaw)
+        output = planner.step(now_s, VehicleState(now_s, position, velocity, yaw), velocity, world)
+        outputs.append(output)
+        if len(outputs) > 1 and output.state in stop_at and outputs[-2].state is output.state:
+            break
+        for _ in range(2):
+            vehicle = VehicleState(now_s, position, velocity, yaw)
+            setpoint = tracker.setpoint(now_s, vehicle, output.reference, goal)
+            setpoints.append(setpoint)
+            if setpoint.kind is SetpointKind.POSITION:
+                velocity = np.clip(setpoint.position_ned_m - position, -1.0, 1.0)
+            else:
+                velocity = setpoint.velocity_ned_mps
+            position = position + SETPOINT_DT_S * velocity
+            yaw = setpoint.yaw_rad
+            now_s += SETPOINT_DT_S
+            path.append(position.copy())
+    return Flight(np.array(path), outputs, setpoints, planner)
+
+
+def clearance_ok(boxes=(), wires=(), path=None) -> bool:
+    truth = SyntheticOccupancyMap(boxes=list(boxes), wires=list(wires), inflation_m=ROBOT_RADIUS_M)
+    return not truth.occupied(path).any()
+
+
+def test_a_wall_across_the_path_is_flown_around() -> None:
+    obstacle = wall(8.0, 1.5, 15.0)  # too high to climb over within the horizon
+    flight = fly(SyntheticOccupancyMap(boxes=[obstacle]))
+    assert flight.states[-1] is PlannerState.ARRIVED
+    assert np.linalg.norm(flight.path[-1] - GOAL) <= PARAMS.arrival_tolerance_m + 0.1
+    beside = flight.path[(flight.path[:, 0] > 7.5) & (flight.path[:, 0] < 8.8)]
+    assert len(beside) and np.all(np.abs(beside[:, 1]) > 1.5 + ROBOT_RADIUS_M)
+    assert np.ptp(flight.path[:, 2]) < 0.1  # around, not over
+    assert clearance_ok(boxes=[obstacle], path=flight.path)
+    assert len(flight.outputs) * 0.1 < 20.0
+
+
+def test_a_low_wide_wall_is_flown_over() -> None:
+    obstacle = wall(8.0, 10.0, 4.0)  # 20 m wide, 1 m above the flight altitude
+    flight = fly(SyntheticOccupancyMap(boxes=[obstacle]))
+    assert flight.states[-1] is PlannerState.ARRIVED
+    crossing = flight.path[(flight.path[:, 0] > 7.5) & (flight.path[:, 0] < 8.8)]
+    assert len(crossing) and np.all(-crossing[:, 2] > 4.0 + ROBOT_RADIUS_M)
+    assert np.abs(flight.path[:, 1]).max() < 1.0  # over, not around
+    assert clearance_ok(boxes=[obstacle], path=flight.path)
+
+
+@pytest.mark.parametrize("altitude_m", [3.0, 3.4])
+def test_a_wire_across_the_path_is_passed_over(altitude_m: float) -> None:
+    obstacle = wire_across(8.0, altitude_m)
+    flight = fly(SyntheticOccupancyMap(wires=[obstacle]))
+    assert flight.states[-1] is PlannerState.ARRIVED
+    crossing = flight.path[np.argmin(np.abs(flight.path[:, 0] - 8.0))]
+    assert -crossing[2] > altitude_m + 0.5  # over the wire and its inflation
+    assert clearance_ok(wires=[obstacle], path=flight.path)
+    labels = {o.label for o in flight.outputs}
+    assert any("climb" in label for label in labels)
+    assert max(np.abs(flight.path[:, 1])) < 1.0  # straight over, no detour
+
+
+def test_a_wire_over_the_path_with_a_ceiling_is_passed_under() -> None:
+    obstacle = wire_across(8.0, 3.4)
+    # a deck 4 m above home over the crossing: no way over, the flight floor is 1 m
+    deck = Box(np.array([5.0, -30.0, -30.0]), np.array([11.0, 30.0, -4.0]))
+    flight = fly(SyntheticOccupancyMap(boxes=[deck], wires=[obstacle]))
+    assert flight.states[-1] is PlannerState.ARRIVED
+    crossing = flight.path[np.argmin(np.abs(flight.path[:, 0] - 8.0))]
+    assert PARAMS.min_altitude_m - 0.05 < -crossing[2] < 3.4 - 0.5
+    assert clearance_ok(boxes=[deck], wires=[obstacle], path=flight.path)
+
+
+def test_a_corridor_is_flown_inside() -> None:
+    walls = corridor(2.0, 18.0, 2.0, 10.0)
+    goal = np.array([22.0, 1.0, -3.0])
+    flight = fly(SyntheticOccupancyMap(boxes=walls), goal)
+    assert flight.states[-1] is PlannerState.ARRIVED
+    inside = flight.path[(flight.path[:, 0] > 2.0) & (flight.path[:, 0] < 18.0)]
+    assert len(inside) > 50
+    assert np.abs(inside[:, 1]).max() < 2.0 - ROBOT_RADIUS_M
+    assert clearance_ok(boxes=walls, path=flight.path)
+
+
+@pytest.fixture(scope="module")
+def canyon() -> tuple[list[Box], Flight]:
+    boxes = box_canyon(-2.0, 10.0, 2.0, 6.0)  # walls, an end wall and a roof: a dead end
+    return boxes, fly(
+        SyntheticOccupancyMap(boxes=boxes), np.array([25.0, 0.0, -3.0]), duration_s=80.0
+    )
+
+
+def test_a_box_canyon_stops_the_vehicle_and_starts_recovery(canyon) -> None:
+    boxes, flight = canyon
+    states = flight.states
+    braking = flight.first(PlannerState.BRAKING)
+    recovering = flight.first(PlannerState.RECOVERING)
+    assert all(s is PlannerState.TRACKING for s in states[:braking])
+    assert braking < recovering
+    assert all(s is PlannerState.BRAKING for s in states[braking:recovering])
+    brake = flight.outputs[braking]
+    assert brake.label == "stop" and brake.reference.brake
+    assert flight.setpoints[2 * braking].kind is SetpointKind.BRAKE
+    # recovery: hold the position and rotate in place (4.5)
+    rotate = flight.outputs[recovering]
+    assert rotate.label == "rotate"
+    assert rotate.reference.yaw_rate_radps == PARAMS.recovery_yaw_rate_radps
+    hold = flight.setpoints[2 * recovering + 1]
+    assert hold.kind is SetpointKind.POSITION and hold.yaw_rate_radps > 0.0
+    np.testing.assert_allclose(hold.velocity_ned_mps, 0.0)
+    assert clearance_ok(boxes=boxes, path=flight.path)
+
+
+def test_stuck_in_the_canyon_rewinds_along_the_flown_path_then_gives_up(canyon) -> None:
+    _, flight = canyon
+    rewinding = flight.first(PlannerState.REWINDING)
+    rewind = flight.outputs[rewinding]
+    assert rewind.label == "rewind"
+    waypoints = rewind.reference.positions_ned_m
+    flown = flight.path[: 2 * rewinding + 1]
+    gaps = np.linalg.norm(waypoints[:, None] - flown[None], axis=-1).min(axis=1)
+    assert gaps.max() < 0.05  # every rewind waypoint lies on the flown path
+    length = np.linalg.norm(np.diff(waypoints, axis=0), axis=1).sum()
+    assert PARAMS.rewind_distance_m <= length < PARAMS.rewind_distance_m + 1.0
+    speed = np.linalg.norm(rewind.reference.velocities_ned_mps[:-1], axis=1)
+    np.testing.assert_allclose(speed, PARAMS.rewind_speed_mps, rtol=1e-6)
+    # the vehicle follows it back
+    after = 2 * (rewinding + 40)
+    assert np.linalg.norm(flight.path[after] - waypoints[-1]) < np.linalg.norm(
+        flight.path[2 * rewinding] - waypoints[-1]
+    )
+    # the dead end is not circled forever: after the rewinds the goal is unreachable
+    assert flight.states[-1] is PlannerState.UNREACHABLE
+    assert flight.states.count(PlannerState.REWINDING) > 0
+    assert len(flight.outputs) * 0.1 < 80.0
+
+
+def test_a_goal_inside_an_obstacle_is_reported_unreachable() -> None:
+    building = Box(np.array([18.0, -2.0, -6.0]), np.array([22.0, 2.0, 0.0]))
+    flight = fly(SyntheticOccupancyMap(boxes=[building]))
+    assert flight.states[-1] is PlannerState.UNREACHABLE
+    # reported within the confirmation cycles of first seeing it, not after circling
+    assert len(flight.outputs) * 0.1 < 10.0
+    hold = flight.outputs[-1].reference
+    assert hold.times_s.tolist() == [0.0]
+    assert np.linalg.norm(hold.positions_ned_m[0] - flight.path[-1]) < 1.0
+    assert clearance_ok(boxes=[building], path=flight.path)
+
+
+def test_arrival_within_tolerance_holds_position_at_the_goal() -> None:
+    goal = np.array([6.0, 2.0, -3.5])
+    flight = fly(SyntheticOccupancyMap(), goal, stop_at=())  # keep flying after arrival
+    arrived = flight.first(PlannerState.ARRIVED)
+    assert all(s is PlannerState.ARRIVED for s in flight.states[arrived:])
+    assert np.linalg.norm(flight.path[2 * arrived] - goal) <= PARAMS.arrival_tolerance_m + 0.05
+    holds = flight.setpoints[2 * arrived + 1 :]
+    assert all(s.kind is SetpointKind.POSITION for s in holds)
+    np.testing.assert_allclose(holds[-1].position_ned_m, goal)
+    assert np.linalg.norm(flight.path[-1] - goal) < 0.05  # settled on the goal
+    assert flight.outputs[-1].label == "" and flight.outputs[arrived].label == "arrived"
+
+
+def test_without_a_goal_the_planner_holds() -> None:
+    planner = LocalPlanner(PARAMS, LIBRARY)
+    vehicle = VehicleState(0.0, START, np.zeros(3), 0.3)
+    output = planner.step(0.0, vehicle, np.zeros(3), SyntheticOccupancyMap())
+    assert output.state is PlannerState.IDLE
+    np.testing.assert_allclose(output.reference.positions_ned_m, [START])
+
+
+def test_no_progress_for_the_stuck_timeout_starts_a_rewind() -> None:
+    """A vehicle that stops moving (a gust, a tether) while every plan looks free."""
+    planner = LocalPlanner(PARAMS, LIBRARY)
+    world = SyntheticOccupancyMap(omniscient=True)
+    planner.set_goal(GOAL, 0.0)
+    position, velocity = START.copy(), np.array([1.0, 0.0, 0.0])
+    now_s, states = 0.0, []
+    for _ in range(60):  # 6 s flying north at 1 m/s: breadcrumbs every 0.5 m
+        planner.step(now_s, VehicleState(now_s, position, velocity, 0.0), velocity, world)
+        position, now_s = position + 0.1 * velocity, now_s + 0.1
+    stuck_at = now_s
+    while now_s < stuck_at + PARAMS.stuck_timeout_s + 1.0:  # then no motion at all
+        output = planner.step(now_s, VehicleState(now_s, position, velocity, 0.0), velocity, world)
+        states.append((round(now_s - stuck_at, 1), output.state))
+        if output.state is PlannerState.REWINDING:
+            break
+        now_s += 0.1
+    assert all(s is PlannerState.TRACKING for _, s in states[:-1])
+    waited, state = states[-1]
+    assert state is PlannerState.REWINDING
+    assert PARAMS.stuck_timeout_s - 0.5 <= waited <= PARAMS.stuck_timeout_s + 0.2
+    back = output.reference.positions_ned_m
+    np.testing.assert_allclose(back[0], position)
+    assert back[-1][0] == pytest.approx(position[0] - PARAMS.rewind_distance_m, abs=0.5)
+    np.testing.assert_allclose(back[:, 1:], np.tile(START[1:], (len(back), 1)))
