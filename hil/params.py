@@ -8,7 +8,7 @@ PX4 v1.14 multicopter defaults unless the description says otherwise.
 
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 
 def _px4(name: str) -> dict[str, str]:
@@ -17,6 +17,8 @@ def _px4(name: str) -> dict[str, str]:
 
 class VehicleSimParams(BaseModel):
     """The simulated PX4-like multirotor: airframe, cascaded controller, commander, telemetry."""
+
+    model_config = ConfigDict(extra="forbid")
 
     # --- simulation -------------------------------------------------------------------------
     seed: int = Field(0, description="seed of every random draw (noise, wind, quirks)")

@@ -2,7 +2,7 @@
 
 from enum import StrEnum
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class UnknownPolicy(StrEnum):
@@ -30,6 +30,8 @@ class CheckMode(StrEnum):
 
 class PlanningParams(BaseModel):
     """Planner parameters; each field names its unit and thesis reference."""
+
+    model_config = ConfigDict(extra="forbid")
 
     # --- vehicle limits the library is built from (4.5, Fig. 4.8) ---
     max_speed_mps: float = Field(

@@ -35,6 +35,11 @@ def test_unknown_key_and_out_of_bounds_value_are_rejected(tmp_path: Path) -> Non
     typo.write_text("[mapping]\nrobot_radius = 0.7\n")
     with pytest.raises(ValidationError, match="robot_radius"):
         load_settings(typo)
+    for section in ("link", "perception", "mapping", "catenary", "planning", "vehicle_sim"):
+        misspelt = tmp_path / f"{section}.toml"
+        misspelt.write_text(f"[{section}]\nno_such_field = 1\n")
+        with pytest.raises(ValidationError, match="no_such_field"):
+            load_settings(misspelt)
     negative = tmp_path / "negative.toml"
     negative.write_text("[mapping]\nrobot_radius_m = -1\n")
     with pytest.raises(ValidationError, match="robot_radius_m"):
