@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from mapping.catenary_init import ranked_hypotheses, seed_hypotheses
+from mapping.catenary_init import hop_hypotheses, ranked_hypotheses, seed_hypotheses
 from mapping.catenary_jacobian import Projection, project_catenary, residual_jacobian
 from mapping.catenary_model import sample_abscissae_m
 from mapping.catenary_params import CatenaryParams
@@ -145,6 +145,34 @@ def _solved_space(
 
 def fit_catenary(views: CatenaryViews, theta0: np.ndarray, params: CatenaryParams) -> CatenaryFit:
     """Theta* = argmin f (eq. 3.9) from the initial Theta `theta0`, with its uncertainty.
+
+    A local solve (`local_fit`), then, while the best fit is neither confident nor explains
+    the data (RMS above `hop_stop_rms_px`), up to `hop_rounds` rounds of basin hopping: the
+    `hop_starts` cheapest hypotheses of `hop_hypotheses` around the best fit are solved and
+    the best fit is kept (confident first, then lowest cost f). A bad initialisation inside
+    the view frusta then reaches the wire far more often (`wireavoid bench catenary`).
+    """
+    best = local_fit(views, theta0, params)
+    for _ in range(params.hop_rounds):
+        if best.confident or best.rms_residual_px <= params.hop_stop_rms_px:
+            break
+        hypotheses = ranked_hypotheses(views, params, hop_hypotheses(views, params, best.theta))
+        fits = [local_fit(views, h, params) for h in hypotheses[: params.hop_starts]]
+        better = [f for f in fits if _preferred(f, best)]
+        if not better:
+            break
+        for fit in better:
+            best = fit if _preferred(fit, best) else best
+    return best
+
+
+def _preferred(fit: CatenaryFit, other: CatenaryFit) -> bool:
+    """True if `fit` beats `other`: confident over not, then by lower cost f (eq. 3.13)."""
+    return (fit.confident, -fit.cost) > (other.confident, -other.cost)
+
+
+def local_fit(views: CatenaryViews, theta0: np.ndarray, params: CatenaryParams) -> CatenaryFit:
+    """One local solve of eq. 3.9 from `theta0`: r^T r, then the robust refinement.
 
     With the inverse-depth parameterisation the vertex of `theta0` must lie in front of
     view 0 (the reference keyframe C_1 of eq. 3.33).

@@ -15,7 +15,7 @@ from mapping.catenary_jacobian import Projection, project_catenary
 from mapping.catenary_model import sample_abscissae_m
 from mapping.catenary_params import CatenaryParams
 from mapping.catenary_residuals import CatenaryViews
-from mapping.catenary_uncertainty import theta_from_inverse_depth
+from mapping.catenary_uncertainty import inverse_depth_from_theta, theta_from_inverse_depth
 
 SCORING_POINTS = 20
 
@@ -57,6 +57,40 @@ def seed_hypotheses(
             )
         )
     return np.array(seeds)
+
+
+HOP_DEPTH_FACTORS = (0.5, 1.0, 2.0)
+HOP_YAW_OFFSETS_RAD = (0.0, np.pi / 4, -np.pi / 4, np.pi / 2)
+HOP_SAGS_M = (20.0, 1000.0)
+
+
+def hop_hypotheses(views: CatenaryViews, params: CatenaryParams, theta: np.ndarray) -> np.ndarray:
+    """`(K, 5)` Theta hypotheses around a fit, for basin hopping (3.3.3, beyond the thesis).
+
+    The vertex stays on its ray through view 0 (so every hypothesis stays inside that frustum)
+    at half, the same or twice its inverse depth; the yaw turns by 0, +-45 or 90 degrees; the
+    sag a is kept or set to a curved or a near-straight value. The fit itself is left out.
+    Empty if the vertex is behind view 0.
+    """
+    if (views.rotation_cam_from_world[0] @ theta[:3] + views.translation_cam_from_world_m[0])[
+        2
+    ] <= params.min_depth_m:
+        return np.empty((0, 5))
+    psi = inverse_depth_from_theta(theta, views)
+    grid = np.array(
+        [
+            (factor, yaw, sag)
+            for factor in HOP_DEPTH_FACTORS
+            for yaw in HOP_YAW_OFFSETS_RAD
+            for sag in (theta[4], *HOP_SAGS_M)
+        ]
+    )
+    grid = grid[~((grid[:, 0] == 1.0) & (grid[:, 1] == 0.0) & (grid[:, 2] == theta[4]))]
+    hypotheses = np.tile(psi, (len(grid), 1))
+    hypotheses[:, 2] *= grid[:, 0]
+    hypotheses[:, 3] += grid[:, 1]
+    hypotheses[:, 4] = np.clip(grid[:, 2], params.sag_min_m, params.sag_max_m)
+    return np.array([theta_from_inverse_depth(h, views) for h in hypotheses])
 
 
 def ranked_hypotheses(

@@ -110,6 +110,20 @@ class CatenaryParams(BaseModel):
     init_sag_m: float = Field(
         200.0, gt=0, description="sag a of initial hypotheses (near-straight) (3.4.1), m"
     )
+    hop_rounds: int = Field(
+        3,
+        ge=0,
+        description="rounds of basin hopping after a fit that neither is confident nor explains "
+        "the data (3.3.3, beyond the thesis); 0: a single local solve",
+    )
+    hop_starts: int = Field(
+        3, ge=1, description="perturbed hypotheses solved per hopping round, best first"
+    )
+    hop_stop_rms_px: float = Field(
+        0.5,
+        gt=0,
+        description="a fit with an RMS residual below this explains the data: no hopping, px",
+    )
     max_keyframes: int = Field(16, ge=2, description="most recent keyframes used per fit (3.4.2)")
     instance_min_pixels: int = Field(
         25, ge=1, description="smallest connected wire component kept as an instance (3.7.3), px"

@@ -5,7 +5,9 @@ Each node holds the camera pose `world_from_camera` (NED from camera frame, see
 `mapping.pose`), the image timestamp, and six expanded images on the expansion grid (stereo
 front/back and own-return front/back, wire front/back; see `mapping.expansion`). Node images
 live in one preallocated `(max_nodes, Hc, Wc, 6) float32` array, so a query projects all
-points into all nodes with one matmul and gathers with one fancy index.
+points into each node and costs it in one compiled pass (`mapping.occupancy.summed_costs`); a
+large batch is split across `query_threads` threads (the kernel releases the GIL), each
+point's answer unchanged.
 
 Keyframes (4.4.6, 3.4.2): a frame becomes a new node when the camera moved at least
 `keyframe_translation_m` or turned at least `keyframe_rotation_deg` since the newest keyframe;
@@ -17,6 +19,8 @@ graph is full; nodes older than `max_node_age_s` are evicted on `insert` / `prun
 
 from __future__ import annotations
 
+import functools
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from enum import Enum
 
@@ -24,7 +28,7 @@ import numpy as np
 
 from mapping.camera import StereoRig
 from mapping.expansion import DisparityExpander, ExpandedImage
-from mapping.occupancy import occupancy_measure, stereo_occupancy_cost, wire_occupancy_cost
+from mapping.occupancy import summed_costs
 from mapping.params import MappingParams
 from mapping.pose import Pose
 from mapping.query import OccupancyQuery
@@ -61,15 +65,14 @@ class DroanMap:
         self.grid_camera = self.expander.grid_camera
         h, w = self.grid_camera.shape
         n = params.max_nodes
-        # one extra row of cells at the end: the "unknown" cell that out-of-view pairs read
-        # 8 channels (6 used): 32-byte rows gather about twice as fast as 24-byte ones
-        self._images = np.full((n * h * w + 1, 8), -1.0, dtype=np.float32)
-        self._unknown_cell = n * h * w
+        # 8 channels (6 used): a pixel's 32-byte row never straddles a cache line
+        self._images = np.full((n * h * w, 8), -1.0, dtype=np.float32)
         self._projection = np.zeros((n, 3, 3), dtype=np.float32)  # K_grid @ R_cw
         self._offset = np.zeros((n, 3), dtype=np.float32)  # K_grid @ t_cw
         self._slots: list[DroanNode | None] = [None] * n
         self._order: list[int] = []  # occupied slots, oldest first
         self._active = np.zeros(0, dtype=np.intp)
+        self._occupancy(np.zeros((0, 3)))  # compile (or load) the query kernel now, not in flight
 
     # --- graph ---------------------------------------------------------------------------
 
@@ -200,36 +203,37 @@ class DroanMap:
         if n == 0 or not self._order:
             zeros = np.zeros(n, dtype=np.float32)
             return OccupancyQuery(np.zeros(n, bool), zeros, np.zeros(n, bool))
-        slots = self._active
-        h, w = self.grid_camera.shape
-        # (K, 3, N): rows u z, v z, z of every point in every node's grid camera
-        homogeneous = self._projection[slots] @ np.ascontiguousarray(points.T)
-        homogeneous += self._offset[slots][:, :, None]
-        z = homogeneous[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv_z = np.float32(1.0) / z
-            u = homogeneous[:, 0] * inv_z + np.float32(0.5)
-            v = homogeneous[:, 1] * inv_z + np.float32(0.5)
-            in_view = (z > _MIN_DEPTH_M) & (z <= self.params.max_range_m)
-            in_view &= (u >= 0) & (u < w) & (v >= 0) & (v < h)
-            flat = (slots[:, None].astype(np.int32) * h + v.astype(np.int32)) * w
-            flat += u.astype(np.int32)
-        flat = np.where(in_view, flat, np.intp(self._unknown_cell)).astype(np.intp, copy=False)
-        cells = np.take(self._images, flat, axis=0, mode="clip")  # faster than [flat]
-        d_s = np.float32(self.rig.bf_px_m) * inv_z
-        stereo_cost, observed = stereo_occupancy_cost(
-            d_s,
-            cells[..., 0],
-            cells[..., 1],
-            cells[..., 2],
-            cells[..., 3],
-            self.params.disparity_sigma_px,
-            self.params.free_discount,
-            self.params.occluded_discount,
-        )
-        wire_cost = wire_occupancy_cost(
-            d_s, cells[..., 4], cells[..., 5], self.params.free_discount
-        )
-        occupancy = np.maximum(occupancy_measure(stereo_cost), occupancy_measure(wire_cost))
-        seen = observed.any(axis=0)
+        threads = self.params.query_threads
+        if threads == 1 or n < self.params.query_split_min_points:
+            occupancy, seen = self._occupancy(points)
+        else:
+            parts = list(_pool(threads).map(self._occupancy, np.array_split(points, threads)))
+            occupancy = np.concatenate([part[0] for part in parts])
+            seen = np.concatenate([part[1] for part in parts])
         return OccupancyQuery(occupancy >= self.params.occupancy_threshold, occupancy, seen)
+
+    def _occupancy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` points over all nodes."""
+        h, w = self.grid_camera.shape
+        f32 = np.float32
+        return summed_costs(
+            np.ascontiguousarray(points, dtype=f32),
+            self._projection,
+            self._offset,
+            self._active,
+            self._images,
+            h,
+            w,
+            f32(self.rig.bf_px_m),
+            f32(_MIN_DEPTH_M),
+            f32(self.params.max_range_m),
+            f32(self.params.disparity_sigma_px),
+            f32(self.params.free_discount),
+            f32(self.params.occluded_discount),
+        )
+
+
+@functools.cache
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """The process-wide worker pool of `threads` threads shared by all maps' queries."""
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="droan-query")

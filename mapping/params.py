@@ -100,6 +100,15 @@ class MappingParams(BaseModel):
         18.0, gt=0, description="new pose-graph node after this rotation (3.4.2, 4.4.6), deg"
     )
     max_nodes: int = Field(20, ge=1, description="pose-graph size bound; oldest evicted (4.4.6)")
+    query_threads: int = Field(
+        2,
+        ge=1,
+        description="threads sharing the points of a large batched query (the kernel releases the "
+        "GIL; results are identical); 1 = serial (4.4.6)",
+    )
+    query_split_min_points: int = Field(
+        2048, ge=1, description="smallest batch split across `query_threads` (4.4.6)"
+    )
     max_node_age_s: float = Field(
         0.0, ge=0, description="nodes older than this are evicted; 0 disables the limit (4.4.6), s"
     )

@@ -177,3 +177,34 @@ def test_thesis_discount_of_occluded_space_is_configurable() -> None:
     assert wall_occupancy(PARAMS) == pytest.approx(odds_first, rel=1e-5)
     thesis = PARAMS.model_copy(update={"occluded_discount": 0.5})  # Table 4.1 as printed
     assert wall_occupancy(thesis) == pytest.approx(odds_first - 0.5 * odds_second, rel=1e-4)
+
+
+def test_a_point_on_one_cameras_plane_keeps_the_other_nodes_evidence() -> None:
+    # Node 1 looks east at a wall 5 m away; node 2, at the same spot, looks north, so the wall
+    # point lies exactly on its image plane (depth 0): it must add nothing, not poison M.
+    droan = DroanMap(RIG, PARAMS)
+    droan.insert(0.0, camera_at(0, 0, -5, yaw_rad=np.pi / 2), np.full(SHAPE, BF / 5.0, np.float32))
+    wall_point = np.array([[0.0, 5.0, -5.0]])
+    assert droan.query(wall_point).collision[0]
+    droan.insert(1.0, camera_at(0, 0, -5), np.zeros(SHAPE, np.float32))
+    answer = droan.query(wall_point)
+    assert np.isfinite(answer.occupancy).all()
+    assert answer.collision[0]
+
+
+def test_threaded_and_serial_queries_agree() -> None:
+    droan = DroanMap(RIG, PARAMS)
+    serial = DroanMap(RIG, PARAMS.model_copy(update={"query_threads": 1}))
+    rng = np.random.default_rng(3)
+    for i, yaw in enumerate(np.linspace(-0.6, 0.6, 5)):
+        disparity = rng.uniform(0.0, BF / 3.0, SHAPE).astype(np.float32)
+        mask = np.zeros(SHAPE, bool)
+        mask[100 + 10 * i, :] = True
+        for world in (droan, serial):
+            world.insert(float(i), camera_at(0, 0.5 * i, -5, yaw), disparity, mask)
+    points = rng.uniform([-2, -8, -9], [25, 8, -1], size=(10_000, 3))
+    threaded, single = droan.query(points), serial.query(points)
+    assert 0 < threaded.collision.sum() < len(points)
+    np.testing.assert_array_equal(threaded.collision, single.collision)
+    np.testing.assert_array_equal(threaded.seen, single.seen)
+    np.testing.assert_array_equal(threaded.occupancy, single.occupancy)

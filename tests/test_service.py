@@ -452,6 +452,10 @@ def test_unit_file_matches_the_service_it_starts() -> None:
     assert "dialout" in unit["SupplementaryGroups"].split()
     assert {"AF_INET", "AF_UNIX"} <= set(unit["RestrictAddressFamilies"].split())
     assert "PrivateDevices" not in unit and "ProtectClock" not in unit  # would hide the UART
+    # /opt is read-only: numba must cache the query kernel in the unit's own cache directory
+    assert unit["ProtectSystem"] == "strict" and "MemoryDenyWriteExecute" not in unit
+    environment = dict(item.split("=", 1) for item in unit["Environment"].split())
+    assert environment["NUMBA_CACHE_DIR"].startswith(f"/var/cache/{unit['CacheDirectory']}/")
     # The default ticks feed the watchdog at least twice per WatchdogSec, late ticks included.
     watchdog_s = float(unit["WatchdogSec"].removesuffix("s"))
     p = ServiceParams()
