@@ -289,11 +289,13 @@ def composite_wires(
     bundles: list[WireBundle],
     cam: Camera,
     p: SyntheticParams,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Draw supports and wires over a float (H, W, 3) image; returns (image, mask uint8 {0, 1})."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Draw supports and wires over a float (H, W, 3) image; returns (image, mask uint8 {0, 1},
+    coverage float32 (H, W) in [0, 1]: the wires' anti-aliased footprint, before degradation)."""
     h, w = image.shape[:2]
     img = image.copy()
     mask = np.zeros((h, w), np.uint8)
+    footprint = np.zeros((h, w), np.float32)
     haze_rgb = img[: max(1, h // 3)].reshape(-1, 3).mean(axis=0)
     visibility_m = rng.uniform(300, 3000)
     for bundle in bundles:
@@ -308,6 +310,7 @@ def composite_wires(
             continue
         mask |= label_mask(segments, widths, h, w)
         coverage = rasterise(segments, widths, h, w, p.supersampling)
+        np.maximum(footprint, coverage, out=footprint)
         base, spec = _material_rgb(rng, bundle.material)
         along = 1 + rng.uniform(0, 0.6) * (fractal_noise(rng, h, w, 3)[..., None] - 0.5)
         glint = np.clip((fractal_noise(rng, h, w, 6) - 0.75) / 0.1, 0, 1)[..., None] * spec
@@ -321,7 +324,7 @@ def composite_wires(
         if spec > 0.25 and thick.any():
             core = rasterise(segments[thick], widths[thick] * 0.3, h, w, p.supersampling)
             img = img + (1 - img) * (core * spec * (1 - haze))[..., None]
-    return img.astype(np.float32), mask
+    return img.astype(np.float32), mask, footprint
 
 
 def with_local_contrast(colour: np.ndarray, image: np.ndarray, contrast: float) -> np.ndarray:
@@ -385,6 +388,19 @@ def synthetic_sample(
     pool: PhotoPool | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """RGB uint8 image (H, W, 3) and wire mask uint8 (H, W) {0, 1}; deterministic in seed, index."""
+    image, mask, _ = rendered_sample(seed, index, height_px, width_px, params, pool)
+    return image, mask
+
+
+def rendered_sample(
+    seed: int,
+    index: int,
+    height_px: int,
+    width_px: int,
+    params: SyntheticParams | None = None,
+    pool: PhotoPool | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`synthetic_sample` plus the wires' anti-aliased coverage (H, W) float32 in [0, 1]."""
     p = params or SyntheticParams()
     rng = np.random.default_rng([seed, index])
     cam = sample_camera(rng, p, height_px, width_px)
@@ -395,8 +411,8 @@ def synthetic_sample(
             if bundle is not None:
                 bundles.append(bundle)
     bg = background(rng, height_px, width_px, horizon_of(cam), pool, p.photo_probability)
-    image, mask = composite_wires(rng, bg, bundles, cam, p)
-    return degrade(rng, image), mask
+    image, mask, coverage = composite_wires(rng, bg, bundles, cam, p)
+    return degrade(rng, image), mask, coverage
 
 
 class SyntheticWireDataset(torch.utils.data.Dataset):
