@@ -286,13 +286,24 @@ def calibration_batches(
     return [network_input(image, input_mode)[None] for image in images]  # type: ignore[arg-type]
 
 
+def cpu_has_vnni() -> bool:
+    """True if this x86 CPU has int8 dot products (AVX512-VNNI or AVX-VNNI); False elsewhere."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split()
+    except OSError:
+        return False
+    return "avx512_vnni" in flags or "avx_vnni" in flags
+
+
 def quantized_onnx(onnx_path: Path, calibration: list[np.ndarray]) -> Path:
     """Path of the int8 version of an ONNX graph, quantising it on the first call.
 
     Static quantisation by ONNX Runtime (QOperator format: QLinearConv, which uses AVX512-VNNI
     / AVX-VNNI int8 dot products): per-channel int8 weights, uint8 activations with MinMax
-    ranges from `calibration` (network input batches). Cached beside the fp32 graph, keyed by
-    a digest of the calibration data.
+    ranges from `calibration` (network input batches). Without VNNI, ONNX Runtime multiplies
+    u8 x s8 with VPMADDUBSW, whose int16 sums saturate; there the weights are quantised to
+    7 bits (`reduce_range`), as ONNX Runtime's documentation advises. Cached beside the fp32
+    graph, keyed by a digest of the calibration data and the weight range.
     """
     from onnxruntime.quantization import (
         CalibrationDataReader,
@@ -301,8 +312,10 @@ def quantized_onnx(onnx_path: Path, calibration: list[np.ndarray]) -> Path:
         quantize_static,
     )
 
+    reduce_range = not cpu_has_vnni()
     digest = hashlib.sha256(b"".join(c.tobytes() for c in calibration)).hexdigest()[:12]
-    path = onnx_path.with_name(f"{onnx_path.stem}_int8_{digest}.onnx")
+    bits = "7bit" if reduce_range else "8bit"
+    path = onnx_path.with_name(f"{onnx_path.stem}_int8_{bits}_{digest}.onnx")
     if path.exists():
         return path
 
@@ -324,6 +337,7 @@ def quantized_onnx(onnx_path: Path, calibration: list[np.ndarray]) -> Path:
             per_channel=True,
             weight_type=QuantType.QInt8,
             activation_type=QuantType.QUInt8,
+            reduce_range=reduce_range,
         )
     tmp.replace(path)
     return path

@@ -15,7 +15,7 @@ from companion.cli_perception import image_mask_pairs
 from perception.checkpoint import save_checkpoint
 from perception.segmenter import WireSegmenter
 
-runner = CliRunner()
+runner = CliRunner(env={"COLUMNS": "400"})  # error panels unwrapped, for matching
 
 
 @pytest.fixture()
