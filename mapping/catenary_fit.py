@@ -18,7 +18,8 @@ import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
 from mapping.catenary_init import hop_hypotheses, ranked_hypotheses, seed_hypotheses
-from mapping.catenary_jacobian import Projection, project_catenary, residual_jacobian
+from mapping.catenary_jacobian import Projection, project_catenary
+from mapping.catenary_kernel import residuals_and_jacobian
 from mapping.catenary_model import sample_abscissae_m
 from mapping.catenary_params import CatenaryParams
 from mapping.catenary_residuals import CatenaryViews
@@ -78,7 +79,8 @@ class CatenaryFit:
 
 
 class _Problem:
-    """Residuals and Jacobian in the solved parameters x, sharing one chain evaluation."""
+    """Residuals and Jacobian in the solved parameters x, from one compiled chain evaluation
+    (`catenary_kernel.residuals_and_jacobian`) shared by the two calls at the same x."""
 
     def __init__(
         self,
@@ -95,28 +97,28 @@ class _Problem:
         self.to_theta = to_theta
         self.theta_jac = theta_jac
         self._x = np.full(5, np.nan)
-        self._theta = np.full(5, np.nan)
-        self._projection: Projection | None = None
+        self._evaluation: tuple[np.ndarray, np.ndarray] | None = None
 
-    def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, Projection]:
-        """Theta and the projected chain at x, cached for the following Jacobian call."""
-        if self._projection is None or not np.array_equal(x, self._x):
+    def _evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(r, dr/dTheta) at x, cached for the other of the two calls."""
+        if self._evaluation is None or not np.array_equal(x, self._x):
             self._x = np.array(x, dtype=float)
-            self._theta = self.to_theta(self._x)
-            self._projection = project_catenary(
-                self._theta, self.x_cat_m, self.views, self.min_depth_m, self.exit_gate_px
+            self._evaluation = residuals_and_jacobian(
+                self.to_theta(self._x),
+                self.x_cat_m,
+                self.views,
+                self.min_depth_m,
+                self.exit_gate_px,
             )
-        return self._theta, self._projection
+        return self._evaluation
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """`(N M,)` r (eq. 3.4)."""
-        return self.evaluate(x)[1].residuals.reshape(-1)
+        return self._evaluate(x)[0]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """`(N M, 5)` dr/dx = dr/dTheta (eq. 3.14) dTheta/dx."""
-        theta, projection = self.evaluate(x)
-        jac = residual_jacobian(theta, self.x_cat_m, self.views, projection, self.min_depth_m)
-        return jac @ self.theta_jac(x)
+        return self._evaluate(x)[1] @ self.theta_jac(x)
 
 
 def _solved_space(
@@ -148,16 +150,21 @@ def fit_catenary(views: CatenaryViews, theta0: np.ndarray, params: CatenaryParam
 
     A local solve (`local_fit`), then, while the best fit is neither confident nor explains
     the data (RMS above `hop_stop_rms_px`), up to `hop_rounds` rounds of basin hopping: the
-    `hop_starts` cheapest hypotheses of `hop_hypotheses` around the best fit are solved and
-    the best fit is kept (confident first, then lowest cost f). A bad initialisation inside
-    the view frusta then reaches the wire far more often (`wireavoid bench catenary`).
+    cheapest re-anchored hypothesis and the `hop_starts` cheapest perturbed ones of
+    `hop_hypotheses` around the best fit are solved, and the best fit is kept (confident
+    first, then lowest cost f). A bad initialisation inside the view frusta then reaches the
+    wire about as often as the data-driven seeds do (`wireavoid bench catenary`).
     """
     best = local_fit(views, theta0, params)
     for _ in range(params.hop_rounds):
         if best.confident or best.rms_residual_px <= params.hop_stop_rms_px:
             break
-        hypotheses = ranked_hypotheses(views, params, hop_hypotheses(views, params, best.theta))
-        fits = [local_fit(views, h, params) for h in hypotheses[: params.hop_starts]]
+        around, anchored = hop_hypotheses(views, params, best.theta)
+        hypotheses = [
+            *ranked_hypotheses(views, params, anchored)[:1],
+            *ranked_hypotheses(views, params, around)[: params.hop_starts],
+        ]
+        fits = [local_fit(views, h, params) for h in hypotheses]
         better = [f for f in fits if _preferred(f, best)]
         if not better:
             break
@@ -203,7 +210,10 @@ def local_fit(views: CatenaryViews, theta0: np.ndarray, params: CatenaryParams) 
             solution.x, loss=params.robust_loss, max_nfev=params.robust_refinement_evaluations
         )
         solution.nfev += evaluations
-    theta, projection = problem.evaluate(solution.x)
+    theta = to_theta(solution.x)
+    projection = project_catenary(
+        theta, x_cat_m, views, params.min_depth_m, params.extrapolation_gate_px
+    )
     uncertainty = fit_uncertainty(
         theta,
         x_cat_m,

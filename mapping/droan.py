@@ -230,6 +230,7 @@ class DroanMap:
             f32(self.params.disparity_sigma_px),
             f32(self.params.free_discount),
             f32(self.params.occluded_discount),
+            f32(self.params.wire_free_weight),
         )
 
 

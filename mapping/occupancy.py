@@ -64,13 +64,13 @@ def stereo_occupancy_cost(
 
 
 def wire_occupancy_cost(
-    disparity_px: np.ndarray, front_px: np.ndarray, back_px: np.ndarray, free_discount: float
+    disparity_px: np.ndarray, front_px: np.ndarray, back_px: np.ndarray, free_weight: float
 ) -> np.ndarray:
-    """Wire cost: C(d) with sigma = 0 (= 1) inside the wire slab [d_b, d_f], -discount elsewhere
-    in view (4.4.5 note); 0 where the node has no wire observation (front < 0)."""
+    """Wire cost: C(d) with sigma = 0 (= 1) inside the wire slab [d_b, d_f], -free_weight
+    elsewhere in view (4.4.5 note); 0 where the node has no wire observation (front < 0)."""
     known = front_px >= 0
     occupied = known & (disparity_px <= front_px) & (disparity_px >= back_px) & (front_px > 0)
-    return np.where(occupied, np.float32(1), np.where(known, -np.float32(free_discount), 0.0))
+    return np.where(occupied, np.float32(1), np.where(known, -np.float32(free_weight), 0.0))
 
 
 def occupancy_measure(costs: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -93,6 +93,7 @@ def summed_costs(
     sigma_px: np.float32,
     free_discount: np.float32,
     occluded_discount: np.float32,
+    wire_free_weight: np.float32,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(M `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` world points over the nodes
     `slots`: `stereo_occupancy_cost`, `wire_occupancy_cost` and `occupancy_measure` fused.
@@ -148,5 +149,5 @@ def summed_costs(
                 if wire_front > zero and images[row, 5] <= d <= wire_front:
                     wire_sum[j] += one
                 else:
-                    wire_sum[j] -= free_discount
+                    wire_sum[j] -= wire_free_weight
     return np.maximum(np.maximum(stereo_sum, wire_sum), zero), seen

@@ -51,6 +51,14 @@ class MappingParams(BaseModel):
         le=1,
         description="discount of safe / potentially-safe evidence against occupied (Table 4.1)",
     )
+    wire_free_weight: float = Field(
+        0.5,
+        ge=0,
+        le=10,
+        description="weight of a view's no-wire evidence against its wire evidence (+1) "
+        "(4.4.5); the thesis' 0.5 keeps a point occupied while over 1/3 of the views that see "
+        "it place it on a wire ray, above 1 carves the slabs into the wires' positions",
+    )
     occluded_discount: float = Field(
         0.0,
         ge=0,

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from mapping.catenary_jacobian import project_catenary, residual_jacobian
+from mapping.catenary_kernel import residuals_and_jacobian
 from mapping.catenary_model import sample_abscissae_m
 from mapping.catenary_residuals import distance_lookup, normalised_distance_transform
 from mapping.catenary_sim import random_scenario, sim_camera
@@ -97,6 +98,26 @@ def test_analytic_jacobian_matches_finite_differences(views, offset) -> None:
         smooth = np.abs(numeric - jac[:, k]) <= 1e-6 + 1e-4 * np.abs(numeric)
         assert smooth.mean() > 0.97, f"parameter {k}"
         assert np.abs(jac[:, k]).max() > 0.0
+
+
+@pytest.mark.parametrize("exit_gate_px", [None, 3.0])
+@pytest.mark.parametrize("case", ["on_wire", "off_wire", "behind_camera"])
+def test_compiled_kernel_gives_the_numpy_residuals_and_jacobian(views, case, exit_gate_px):
+    catenary_views, theta_true = views
+    theta = theta_true + (np.array([0.4, -0.3, 0.2, 0.1, 5.0]) if case == "off_wire" else 0.0)
+    if case == "behind_camera":  # the vertex 2 m behind view 0: clamped depths, off the image
+        rotation = catenary_views.rotation_cam_from_world[0]
+        centre = -rotation.T @ catenary_views.translation_cam_from_world_m[0]
+        theta[:3] = centre - 2.0 * rotation.T @ np.array([0.0, 0.0, 1.0])
+    x_cat = sample_abscissae_m(5.0, 50)
+    projection = project_catenary(theta, x_cat, catenary_views, MIN_DEPTH_M, exit_gate_px)
+    jac = residual_jacobian(theta, x_cat, catenary_views, projection, MIN_DEPTH_M)
+    residuals, kernel_jac = residuals_and_jacobian(
+        theta, x_cat, catenary_views, MIN_DEPTH_M, exit_gate_px
+    )
+    assert projection.clamped.any() == (case == "behind_camera")
+    np.testing.assert_allclose(residuals, projection.residuals.reshape(-1), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(kernel_jac, jac, rtol=1e-9, atol=1e-12)
 
 
 def test_inverse_depth_round_trip_and_its_jacobian(views) -> None:

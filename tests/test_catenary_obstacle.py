@@ -124,13 +124,15 @@ def test_explained_pixels_leave_the_slab_and_the_tube_still_holds_the_wire(appro
     assert approach["with_catenary"].query(truth).collision.all()
 
 
-def fly(occupancy_map, duration_s: float = 40.0) -> tuple[PlannerState, np.ndarray]:
+def fly(
+    occupancy_map, start: np.ndarray = START, goal: np.ndarray = GOAL, duration_s: float = 40.0
+) -> tuple[PlannerState, np.ndarray]:
     """A kinematic vehicle following the planner and tracker on a static map."""
     library = generate_library(SETTINGS.planning)
     planner = LocalPlanner(SETTINGS.planning, library)
     tracker = PathTracker(SETTINGS.planning)
-    planner.set_goal(GOAL, 0.0)
-    position, velocity, yaw, now_s = START.copy(), np.zeros(3), 0.0, 0.0
+    planner.set_goal(goal, 0.0)
+    position, velocity, yaw, now_s = start.copy(), np.zeros(3), 0.0, 0.0
     path = [position.copy()]
     state = PlannerState.IDLE
     while now_s < duration_s:
@@ -142,7 +144,7 @@ def fly(occupancy_map, duration_s: float = 40.0) -> tuple[PlannerState, np.ndarr
             break
         for _ in range(2):  # tracker at 20 Hz, planner at 10 Hz
             setpoint = tracker.setpoint(
-                now_s, VehicleState(now_s, position, velocity, yaw), output.reference, GOAL
+                now_s, VehicleState(now_s, position, velocity, yaw), output.reference, goal
             )
             velocity = setpoint.velocity_ned_mps
             position = position + 0.05 * velocity
@@ -168,6 +170,25 @@ def test_the_catenary_frees_the_flight_line_and_shortens_the_flight(approach) ->
     # With the 4-20 m slab alone the start lies inside the wire evidence: no way to the goal.
     assert slab_state is not PlannerState.ARRIVED
     assert np.linalg.norm(slab_path[-1] - GOAL) > np.linalg.norm(cat_path[-1] - GOAL) + 5.0
+
+
+def test_where_both_arrive_the_catenary_path_is_shorter_with_a_known_clearance(approach):
+    # From 1 m above the wire's vertex height, down to the goal: the slab's wedge of rays
+    # (4-20 m) sends the planner up and around; the tube lets it cross just above the wire.
+    start, goal = np.array([-4.0, 0.0, -8.0]), np.array([16.0, 0.0, -10.0])
+    flights = {name: fly(approach[name], start, goal) for name in ("slab_only", "with_catenary")}
+    lengths, clearances = {}, {}
+    for name, (state, path) in flights.items():
+        assert state is PlannerState.ARRIVED, name
+        lengths[name] = np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
+        clearances[name] = distance_to_polyline_m(path, approach["dense"])[0].min()
+    straight_m = np.linalg.norm(goal - start)
+    assert lengths["with_catenary"] < 1.05 * straight_m
+    assert lengths["slab_only"] > 1.3 * lengths["with_catenary"]
+    # the tube (robot radius + k sigma) is what the planner keeps clear of: never closer
+    (obstacle,) = approach["obstacles"]
+    assert clearances["with_catenary"] > obstacle.radius_m.max()
+    assert clearances["slab_only"] > clearances["with_catenary"]  # the slab's price: detours
 
 
 def test_the_mapper_keeps_keyframes_and_serves_the_same_pipeline(approach) -> None:

@@ -3,6 +3,8 @@
 import numpy as np
 
 from mapping.occupancy import (
+    confidence,
+    confidence_odds,
     occupancy_measure,
     stereo_occupancy_cost,
     summed_costs,
@@ -10,7 +12,7 @@ from mapping.occupancy import (
 )
 
 H, W, NODES = 12, 16, 5
-SIGMA, FREE, OCCLUDED, BF, NEAR, FAR = 0.23, 0.5, 0.25, 40.0, 1e-3, 30.0
+SIGMA, FREE, OCCLUDED, WIRE_FREE, BF, NEAR, FAR = 0.23, 0.5, 0.25, 1.5, 40.0, 1e-3, 30.0
 
 
 def random_graph(rng: np.random.Generator):
@@ -50,7 +52,7 @@ def numpy_reference(points, projection, offset, slots, images):
     stereo, observed = stereo_occupancy_cost(
         d, *np.moveaxis(cells[..., :4], -1, 0), SIGMA, FREE, OCCLUDED
     )
-    wire = wire_occupancy_cost(d, cells[..., 4], cells[..., 5], FREE)
+    wire = wire_occupancy_cost(d, cells[..., 4], cells[..., 5], WIRE_FREE)
     return np.maximum(occupancy_measure(stereo), occupancy_measure(wire)), observed.any(axis=0)
 
 
@@ -63,10 +65,18 @@ def test_the_kernel_answers_as_the_numpy_definition() -> None:
     f32 = np.float32
     occupancy, seen = summed_costs(
         points, projection, offset, slots, images, H, W,
-        f32(BF), f32(NEAR), f32(FAR), f32(SIGMA), f32(FREE), f32(OCCLUDED),
+        f32(BF), f32(NEAR), f32(FAR), f32(SIGMA), f32(FREE), f32(OCCLUDED), f32(WIRE_FREE),
     )  # fmt: skip
     expected_occupancy, expected_seen = numpy_reference(points, projection, offset, slots, images)
     assert 0.1 < seen.mean() < 0.95 and 0.05 < (occupancy > 1.0).mean() < 0.95
     assert np.isfinite(occupancy).all()
     np.testing.assert_array_equal(seen, expected_seen)
     np.testing.assert_allclose(occupancy, expected_occupancy, rtol=1e-5, atol=1e-4)
+
+
+def test_the_occupied_cost_is_the_odds_of_the_eq_4_4_confidence() -> None:
+    d = np.array([0.1, 0.23, 0.5, 2.0, 40.0], np.float32)
+    c = confidence(d, SIGMA)
+    np.testing.assert_allclose(c, np.clip((d - SIGMA) / d, 0, 1), rtol=1e-6)
+    np.testing.assert_allclose(confidence_odds(d, SIGMA), c / (1 - c), rtol=1e-5)
+    assert confidence_odds(d, SIGMA)[:2].tolist() == [0.0, 0.0]  # d <= sigma: no evidence

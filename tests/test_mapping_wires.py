@@ -14,12 +14,13 @@ WIRE_HEIGHTS_M = (6.0, 9.0, 12.0)
 WIRE_NORTH_M = 10.0
 
 
-def fused_map(altitudes_m: np.ndarray) -> DroanMap:
+def fused_map(altitudes_m: np.ndarray, wire_free_weight: float = 0.5) -> DroanMap:
     params = MappingParams(
         robot_radius_m=0.3,
         max_nodes=40,
         camera_width_px=320,
         camera_height_px=240,
+        wire_free_weight=wire_free_weight,
     )
     rig = stereo_rig_from_params(params.camera)
     world = World(
@@ -45,15 +46,42 @@ def column(droan: DroanMap, heights_m) -> np.ndarray:
     return droan.query(points).collision
 
 
+def ray_points(wire_height_m: float, norths_m) -> np.ndarray:
+    """Points on the ray from the single view (altitude 9 m) through a wire, NED, m."""
+    north = np.asarray(norths_m, dtype=float)
+    heights = 9.0 + (wire_height_m - 9.0) * north / WIRE_NORTH_M
+    return np.stack([north, np.zeros_like(north), -heights], 1)
+
+
+def occupied_fraction(droan: DroanMap) -> float:
+    """Fraction of the vertical plane through the flight line (0-24 m ahead, 0-18 m up)."""
+    north, height = np.meshgrid(np.arange(0.0, 24.1, 0.5), np.arange(0.0, 18.1, 0.25))
+    points = np.stack([north.ravel(), np.zeros(north.size), -height.ravel()], 1)
+    return float(droan.query(points).collision.mean())
+
+
 def test_single_observation_is_a_slab_and_fusion_localises_three_wires() -> None:
     single = fused_map(np.array([9.0]))
     assert len(single) == 1
-    # one view: every wire is a 4-20 m slab, the gaps between them cannot be resolved
-    # along the view direction, but points at the wires' own depth are all occupied
+    # one view: every wire is a 4-20 m slab of rays; the gaps between them are resolved in
+    # angle, but along the rays nothing is: in front of and behind each wire is occupied
     assert column(single, WIRE_HEIGHTS_M).all()
+    assert not column(single, [7.5, 10.5, 3.0, 15.0]).any()
+    behind = np.concatenate([ray_points(h, [14.0, 18.0]) for h in (6.0, 12.0)])
+    assert single.query(behind).collision.all()
+    assert single.query(ray_points(9.0, [3.0, 21.0])).collision.sum() == 0  # outside 4-20 m
 
-    fused = fused_map(np.arange(1.0, 17.01, 0.5))
-    assert column(fused, WIRE_HEIGHTS_M).all()
-    midpoints = [7.5, 10.5]
-    assert not column(fused, midpoints).any()  # the space between the wires clears
-    assert not column(fused, [3.0, 15.0]).any()  # and the space above / below them
+    altitudes = np.arange(1.0, 17.01, 0.5)
+    carving = fused_map(altitudes, wire_free_weight=2.0)
+    assert column(carving, WIRE_HEIGHTS_M).all()  # every wire is still occupied
+    assert not column(carving, [7.5, 10.5, 3.0, 15.0]).any()  # the space between clears
+    assert not carving.query(behind).collision.any()  # and the slabs behind the wires
+    assert occupied_fraction(carving) < 0.75 * occupied_fraction(single)
+
+    # The thesis' 0.5 weight keeps any point that a third of the views place on a wire ray:
+    # with the three wires' rays crossing, fusing heights does not shrink the slabs.
+    thesis = fused_map(altitudes)
+    assert column(thesis, WIRE_HEIGHTS_M).all()
+    assert not column(thesis, [7.5, 10.5]).any()
+    assert thesis.query(behind).collision.all()
+    assert occupied_fraction(thesis) > 0.95 * occupied_fraction(single)
