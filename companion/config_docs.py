@@ -59,7 +59,8 @@ def configuration_markdown(settings: Settings | None = None) -> str:
             "| --- | --- | --- | --- |",
         ]
         for field_name, info in type(section).model_fields.items():
-            default = _toml_value(getattr(section, field_name)).replace("|", "\\|")
+            value = getattr(section, field_name)
+            default = "unset" if value is None else _toml_value(value).replace("|", "\\|")
             description = (info.description or "").replace("|", "\\|")
             lines.append(f"| `{field_name}` | `{default}` | {_bounds(info)} | {description} |")
         lines.append("")
@@ -76,6 +77,10 @@ def settings_toml(settings: Settings) -> str:
         for field_name, info in type(section).model_fields.items():
             if info.description:
                 lines.append(f"# {info.description}")
-            lines.append(f"{field_name} = {_toml_value(getattr(section, field_name))}")
+            value = getattr(section, field_name)
+            # TOML has no null: an unset optional field is written commented out
+            prefix = "# " if value is None else ""
+            shown = info.examples[0] if value is None and info.examples else value
+            lines.append(f"{prefix}{field_name} = {_toml_value(shown)}")
         lines.append("")
     return "\n".join(lines)

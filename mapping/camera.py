@@ -168,13 +168,22 @@ def world_from_camera(world_from_body: Pose, body_from_camera: Pose) -> Pose:
 
 
 def stereo_rig_from_params(params: StereoCameraParams) -> StereoRig:
-    """The configured stereo rig (square pixels, centred principal point)."""
-    camera = PinholeCamera.from_hfov(np.deg2rad(params.hfov_deg), params.width_px, params.height_px)
+    """The configured stereo rig: the calibrated intrinsics when given, else square pixels and
+    a centred principal point from the field of view."""
+    if params.intrinsics_px is None:
+        hfov_rad = np.deg2rad(params.hfov_deg)
+        camera = PinholeCamera.from_hfov(hfov_rad, params.width_px, params.height_px)
+    else:
+        fx, fy, cx, cy = params.intrinsics_px
+        camera = PinholeCamera(fx, fy, cx, cy, params.width_px, params.height_px)
     return StereoRig(camera, params.baseline_m)
 
 
 def body_from_camera_from_params(params: StereoCameraParams) -> Pose:
     """The configured camera extrinsics `body_from_camera`."""
     return body_from_camera_mount(
-        np.asarray(params.mount_position_body_m), pitch_rad=np.deg2rad(params.mount_pitch_deg)
+        np.asarray(params.mount_position_body_m),
+        yaw_rad=np.deg2rad(params.mount_yaw_deg),
+        pitch_rad=np.deg2rad(params.mount_pitch_deg),
+        roll_rad=np.deg2rad(params.mount_roll_deg),
     )

@@ -16,6 +16,9 @@ class StereoCameraParams:
     mount_position_body_m: tuple[float, float, float]
     mount_pitch_deg: float
     max_disparity_px: int
+    intrinsics_px: tuple[float, float, float, float] | None = None
+    mount_yaw_deg: float = 0.0
+    mount_roll_deg: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,12 +141,25 @@ class MappingParams(BaseModel):
     camera_hfov_deg: float = Field(
         72.0, gt=10, lt=170, description="horizontal field of view of the rectified camera, deg"
     )
+    camera_intrinsics_px: tuple[float, float, float, float] | None = Field(
+        None,
+        description="(fx, fy, cx, cy) of the rectified camera from its calibration (the OAK-D "
+        "reports them), px; unset: square pixels and a centred principal point from "
+        "camera_hfov_deg",
+        examples=[(451.2, 452.8, 322.4, 236.9)],
+    )
     camera_baseline_m: float = Field(0.075, gt=0, description="stereo baseline b (eq. 4.1), m")
     camera_mount_position_body_m: tuple[float, float, float] = Field(
         (0.1, 0.0, 0.0), description="camera centre in body FRD (x fwd, y right, z down), m"
     )
     camera_mount_pitch_deg: float = Field(
         0.0, ge=-90, le=90, description="camera tilt relative to body x, up positive, deg"
+    )
+    camera_mount_yaw_deg: float = Field(
+        0.0, ge=-180, le=180, description="camera pan about body z (Z-Y-X), right positive, deg"
+    )
+    camera_mount_roll_deg: float = Field(
+        0.0, ge=-180, le=180, description="camera roll about its optical axis (Z-Y-X), deg"
     )
     camera_max_disparity_px: int = Field(
         128, ge=16, description="disparity search range (SGBM numDisparities, multiple of 16), px"
@@ -171,6 +187,9 @@ class MappingParams(BaseModel):
             self.camera_mount_position_body_m,
             self.camera_mount_pitch_deg,
             self.camera_max_disparity_px,
+            self.camera_intrinsics_px,
+            self.camera_mount_yaw_deg,
+            self.camera_mount_roll_deg,
         )
 
     @property
@@ -182,6 +201,14 @@ class MappingParams(BaseModel):
             self.sgbm_speckle_window_px,
             self.sgbm_speckle_range_px,
         )
+
+    @model_validator(mode="after")
+    def _intrinsics_are_positive(self) -> "MappingParams":
+        if self.camera_intrinsics_px is not None:
+            fx, fy, _, _ = self.camera_intrinsics_px
+            if not (fx > 0 and fy > 0):
+                raise ValueError("camera_intrinsics_px needs fx > 0 and fy > 0")
+        return self
 
     @model_validator(mode="after")
     def _median_is_odd(self) -> "MappingParams":

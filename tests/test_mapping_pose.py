@@ -3,7 +3,15 @@
 import numpy as np
 import pytest
 
-from mapping.camera import PinholeCamera, StereoRig, body_from_camera_mount, world_from_camera
+from mapping.camera import (
+    PinholeCamera,
+    StereoRig,
+    body_from_camera_from_params,
+    body_from_camera_mount,
+    stereo_rig_from_params,
+    world_from_camera,
+)
+from mapping.params import MappingParams
 from mapping.pose import Pose, PoseHistory, quaternion_from_rotation, rotation_from_quaternion
 
 
@@ -62,3 +70,21 @@ def test_pose_history_interpolates_and_refuses_to_extrapolate() -> None:
     assert history.pose_at(2.04) is not None
     assert history.pose_at(2.2) is None
     assert history.pose_at(0.5) is None
+
+
+def test_calibrated_intrinsics_and_mount_angles_come_from_the_settings() -> None:
+    default = stereo_rig_from_params(MappingParams().camera).camera
+    assert default.fx_px == default.fy_px and default.cx_px == (640 - 1) / 2.0
+    calibrated = MappingParams(camera_intrinsics_px=(451.2, 452.8, 322.4, 236.9))
+    camera = stereo_rig_from_params(calibrated.camera).camera
+    assert (camera.fx_px, camera.fy_px, camera.cx_px, camera.cy_px) == (451.2, 452.8, 322.4, 236.9)
+    with pytest.raises(ValueError, match="fx > 0"):
+        MappingParams(camera_intrinsics_px=(0.0, 450.0, 320.0, 240.0))
+
+    mount = body_from_camera_from_params(
+        MappingParams(camera_mount_yaw_deg=90.0, camera_mount_roll_deg=90.0).camera
+    )
+    # the optical axis (camera z) looks along body +y (right); camera x (image right) then
+    # points down after a 90 deg roll about that axis
+    np.testing.assert_allclose(mount.rotation @ [0, 0, 1], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(mount.rotation @ [1, 0, 0], [0, 0, 1], atol=1e-12)
