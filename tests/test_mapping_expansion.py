@@ -80,3 +80,24 @@ def test_pool_factor_one_is_full_resolution() -> None:
     image = expander.expand_stereo(np.full((48, 64), 2.0, np.float32))
     assert image.front_px.shape == (48, 64)
     assert image.front_px[24, 32] == pytest.approx(2.0 * 10 / (10 - 0.5 * 2.0) + 0.23, rel=1e-5)
+
+
+def test_the_area_lut_is_looked_up_at_d_plus_lambda_sigma() -> None:
+    def reach_px(sigma_multiplier: float) -> float:
+        params = PARAMS.model_copy(update={"sigma_multiplier": sigma_multiplier})
+        expander = DisparityExpander(RIG, params)
+        disparity = np.zeros(RIG.camera.shape, np.float32)
+        disparity[236:244, 316:324] = BF / 5.0
+        cols = np.flatnonzero(expander.expand_stereo(disparity).front_px[60] > 0)
+        return (expander.grid_camera.cx_px - cols[0]) * PARAMS.pool_factor
+
+    def needed_px(disparity_px: float) -> float:  # the sphere's tangent at that disparity
+        return RIG.camera.fx_px * np.tan(np.arcsin(PARAMS.robot_radius_m * disparity_px / BF))
+
+    sigma = PARAMS.disparity_sigma_px
+    boosted = BF / 5.0 + 10.0 * sigma  # lambda = 10: the window of an obstacle at ~3.7 m
+    grows_px = needed_px(boosted) - needed_px(BF / 5.0)
+    assert grows_px > 3 * PARAMS.pool_factor
+    assert reach_px(10.0) >= needed_px(boosted) + 4 - PARAMS.pool_factor
+    # the window widens as the LUT's disparity does (a lookup at d would not move at all)
+    assert reach_px(10.0) - reach_px(0.0) >= grows_px - PARAMS.pool_factor
