@@ -76,6 +76,48 @@ def synth(
     typer.echo(f"wrote {count} images and masks to {path}")
 
 
+def real_photos(
+    out: Annotated[Path, typer.Option(help="output folder: images/, masks/")] = Path("real-wires"),
+    annotations: Annotated[
+        Path | None, typer.Option(help="annotation JSON (default: the committed set)")
+    ] = None,
+) -> None:
+    """Write the labelled real photographs that are installed (images/, masks/) for `evaluate`.
+
+    The photos come from Debian packages; a missing or changed photo is skipped with a note.
+    """
+    import hashlib
+
+    import cv2
+    import numpy as np
+
+    from perception.real_photos import ANNOTATIONS, labelled_photos, wire_mask
+
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    (out / "masks").mkdir(parents=True, exist_ok=True)
+    written, missing = 0, set()
+    for photo in labelled_photos(annotations or ANNOTATIONS):
+        if not photo.path.is_file():
+            missing.add(photo.debian_package)
+            typer.echo(f"skipped {photo.name}: {photo.path} is not installed", err=True)
+            continue
+        data = photo.path.read_bytes()
+        if hashlib.sha256(data).hexdigest() != photo.sha256:
+            typer.echo(f"skipped {photo.name}: {photo.path} is not the labelled file", err=True)
+            continue
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        h, w = photo.size_px
+        image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
+        cv2.imwrite(str(out / "images" / f"{photo.name}.png"), image)
+        cv2.imwrite(str(out / "masks" / f"{photo.name}.png"), wire_mask(photo) * 255)
+        written += 1
+    if missing:
+        typer.echo(f"to add them: apt-get install {' '.join(sorted(missing))}", err=True)
+    if written == 0:
+        raise typer.BadParameter("none of the labelled photos is installed")
+    typer.echo(f"wrote {written} labelled photos to {out}")
+
+
 def train(
     model: Annotated[str, typer.Option(help="zoo name or grid label")] = DEFAULT_MODEL,
     steps: Annotated[int, typer.Option(min=1, help="optimiser steps")] = 2000,
@@ -84,9 +126,18 @@ def train(
     input_mode: Annotated[str, typer.Option("--input", help="rgb or rgble (2.3.4)")] = "rgb",
     optimizer: Annotated[str, typer.Option(help="adam or adadelta (2.4.2)")] = "adam",
     lr: Annotated[float, typer.Option(help="learning rate; 0 = optimiser default")] = 0.0,
+    final_lr_fraction: Annotated[
+        float, typer.Option(help="cosine decay of the learning rate down to this fraction")
+    ] = 0.1,
+    balance_beta_max: Annotated[
+        float, typer.Option(help="cap of the HED class-balance weight beta (2.3.3)")
+    ] = 0.99,
     seed: Annotated[int, typer.Option(help="training data and initialisation seed")] = 0,
     workers: Annotated[int, typer.Option(min=0, help="data-generation worker processes")] = 1,
     photos: PhotosOption = None,
+    photo_probability: Annotated[
+        float, typer.Option(min=0, max=1, help="share of backgrounds that are real photos")
+    ] = 0.3,
     checkpoint_every: Annotated[int, typer.Option(min=1, help="steps between checkpoints")] = 200,
     eval_count: Annotated[int, typer.Option(min=0, help="held-out images evaluated")] = 64,
     bf16: Annotated[bool, typer.Option(help="bf16 autocast where supported")] = True,
@@ -97,7 +148,7 @@ def train(
 ) -> None:
     """Train a zoo model on on-the-fly synthetic wires (2.3.3); torchrun for DDP."""
     from perception.checkpoint import write_metrics_json
-    from perception.params import TrainingParams
+    from perception.params import SyntheticParams, TrainingParams
     from perception.training import train as run_training
 
     h, w = _hw(crop)
@@ -110,6 +161,8 @@ def train(
         crop_width_px=w,
         optimizer=optimizer,
         learning_rate=lr,
+        final_lr_fraction=final_lr_fraction,
+        balance_beta_max=balance_beta_max,
         seed=seed,
         workers=workers,
         photo_sources=list(_photos(photos)),
@@ -118,7 +171,8 @@ def train(
         bf16=bf16,
     )
     command = "wireavoid " + shlex.join(sys.argv[1:])
-    summary = run_training(params, out, resume=resume, command=command)
+    synthetic = SyntheticParams(photo_probability=photo_probability)
+    summary = run_training(params, out, resume=resume, synthetic=synthetic, command=command)
     if _rank0():
         record = {
             "checkpoint": out.name,
@@ -195,6 +249,7 @@ def register(app: typer.Typer, bench: typer.Typer) -> None:
     """Add this domain's commands to the root app and its benchmarks to `wireavoid bench`."""
     app.command("zoo")(zoo)
     app.command("synth")(synth)
+    app.command("real-photos")(real_photos)
     app.command("train")(train)
     app.command("grid-search")(grid_search)
     app.command("ship-weights")(ship_weights)

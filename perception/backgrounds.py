@@ -11,6 +11,7 @@ every random choice comes from the ``numpy.random.Generator`` passed in.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,11 +55,21 @@ class PhotoPool:
         return len(self.images)
 
     @classmethod
-    def load(cls, sources: list[str]) -> PhotoPool:
-        """Pool from sources: 'skimage' (bundled sample photos if installed) or folders."""
+    def load(cls, sources: list[str], excluded: frozenset[str] | None = None) -> PhotoPool:
+        """Pool from sources: 'skimage' (bundled sample photos if installed) or folders.
+
+        Photos whose SHA-256 is in `excluded` are left out; by default, the real-photo test set
+        and photos with unlabelled wires (`perception.real_photos.training_exclusions`).
+        """
+        if excluded is None:
+            from perception.real_photos import training_exclusions  # it imports this module
+
+            excluded = training_exclusions()
         images, names = [], []
         for source in sources:
             for path in _source_files(source):
+                if hashlib.sha256(path.read_bytes()).hexdigest() in excluded:
+                    continue
                 bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
                 if bgr is None or min(bgr.shape[:2]) < 64:
                     continue

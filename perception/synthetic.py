@@ -16,9 +16,10 @@ The thesis rendered wires with POV-Ray over flight-video frames. Here, in numpy 
 5. Composited over a background of ``perception.backgrounds``; then lighting, defocus blur,
    motion blur, sensor noise and JPEG artefacts.
 
-The mask is geometric and independent of appearance: a pixel is wire when the wire centreline,
-rasterised 8-connected with sub-pixel precision and thickened to ``max(1, round(width))`` px,
-covers it. So every wire, however thin or faint, is a connected 1-px-wide (or wider) label.
+The mask is geometric and independent of appearance: a pixel is wire when the wire's centreline,
+rasterised 8-connected with sub-pixel precision, passes through it, or when the wire's drawn
+footprint covers at least half of it. So every wire, however thin or faint, is a connected
+label at least 1 px wide, and a wider wire's label is as wide as its footprint.
 """
 
 from __future__ import annotations
@@ -260,13 +261,14 @@ def rasterise(
     return cv2.resize(canvas, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
 
 
-def label_mask(segments_px: np.ndarray, widths_px: np.ndarray, h: int, w: int) -> np.ndarray:
-    """Geometric wire mask (H, W) uint8 {0, 1}: centreline 8-connected, max(1, round(width)) px."""
-    mask = np.zeros((h, w), np.uint8)
+def label_mask(segments_px: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    """Geometric wire mask (H, W) uint8 {0, 1} of segments whose anti-aliased `coverage`
+    (`rasterise`) is given: the centreline, 8-connected and 1 px wide, plus every pixel the wire
+    covers at least half. A sub-pixel wire is a connected 1-px line; a wider one is as wide as
+    it is drawn (a 1-px wire straddling two pixels marks both)."""
+    mask = (coverage >= 0.5).astype(np.uint8)
     pts = np.round(segments_px * (1 << _SHIFT)).astype(np.int32)
-    levels = np.maximum(1, np.round(widths_px)).astype(np.int32)
-    for level in np.unique(levels):
-        cv2.polylines(mask, list(pts[levels == level]), False, 1, int(level), cv2.LINE_8, _SHIFT)
+    cv2.polylines(mask, list(pts), False, 1, 1, cv2.LINE_8, _SHIFT)
     return mask
 
 
@@ -308,8 +310,8 @@ def composite_wires(
         segments, widths, depths = wire_segments(bundle, cam, p.width_max_px)
         if len(segments) == 0:
             continue
-        mask |= label_mask(segments, widths, h, w)
         coverage = rasterise(segments, widths, h, w, p.supersampling)
+        mask |= label_mask(segments, coverage)
         np.maximum(footprint, coverage, out=footprint)
         base, spec = _material_rgb(rng, bundle.material)
         along = 1 + rng.uniform(0, 0.6) * (fractal_noise(rng, h, w, 3)[..., None] - 0.5)

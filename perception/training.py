@@ -119,9 +119,9 @@ def held_out_set(
 def coverage_ceiling_ap(masks: list[np.ndarray], coverages: list[np.ndarray]) -> float:
     """Pixel-exact AP (2.4.1) of the renderer's own anti-aliased coverage as the prediction.
 
-    A sub-pixel wire darkens two pixels, its label marks one: even a detector that recovers
-    the rendering exactly, before blur, noise and JPEG, scores this AP, the ceiling of the
-    exact metric on this data (the 1 px tolerance lifts it to 1).
+    What an ideal detector of the rendering, before blur, noise and JPEG, would score: near 1,
+    since labels mark the drawn footprint (`perception.synthetic.label_mask`); what a
+    network loses below it is detection, not label ambiguity.
     """
     from perception.metrics import evaluate_predictions
 

@@ -189,3 +189,42 @@ def test_grid_search_writes_a_table(tmp_path):
     table = (tmp_path / "table.md").read_text()
     assert "| f6c1 | k32-k32-k2 | 10,722 |" in table and "k8-d2-k2" in table
     assert json.loads((tmp_path / "table.json").read_text())[1]["label"] is None
+
+
+def test_train_command_records_the_loss_schedule_and_photo_settings(tmp_path):
+    from typer.testing import CliRunner
+
+    from companion.cli import app
+
+    out = tmp_path / "m.pt"
+    args = [
+        "train",
+        "--model",
+        "k8-d2-k2",
+        "--steps",
+        "2",
+        "--batch",
+        "2",
+        "--crop",
+        "32x40",
+        "--workers",
+        "0",
+        "--eval-count",
+        "0",
+        "--no-bf16",
+        "--photo-probability",
+        "0",
+        "--balance-beta-max",
+        "0.9",
+        "--final-lr-fraction",
+        "0.5",
+        "--out",
+        str(out),
+    ]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    training = read_checkpoint(out)["training"]
+    assert training["params"]["balance_beta_max"] == 0.9
+    assert training["params"]["final_lr_fraction"] == 0.5
+    assert training["synthetic"]["photo_probability"] == 0.0
+    assert json.loads(metrics_path(out).read_text())["training"]["step"] == 2

@@ -1,0 +1,137 @@
+"""The labelled real-photo set: annotations, masks, `wireavoid real-photos`, training exclusion."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import cv2
+import numpy as np
+from typer.testing import CliRunner
+
+from companion.cli import app
+from perception.backgrounds import PhotoPool
+from perception.real_photos import (
+    ANNOTATIONS,
+    labelled_photos,
+    training_exclusions,
+    wire_mask,
+)
+
+runner = CliRunner(env={"COLUMNS": "400"})
+
+
+def test_committed_labels_lie_inside_their_photos_and_mark_thin_lines():
+    photos = labelled_photos()
+    names = [p.name for p in photos]
+    assert len(names) == len(set(names)) and len(photos) >= 7
+    assert sum(bool(p.wires) for p in photos) >= 2  # positives; the rest are negatives
+    for photo in photos:
+        h, w = photo.size_px
+        assert len(photo.sha256) == 64 and photo.debian_package
+        mask = wire_mask(photo)
+        assert mask.shape == (h, w) and set(np.unique(mask)) <= {0, 1}
+        for points, width in photo.wires:
+            assert (points >= -0.5).all()
+            assert (points[:, 0] <= w).all() and (points[:, 1] <= h).all()
+            assert 1 <= width <= 12
+        if photo.wires:  # lines, not blobs: far under 10% of the image
+            assert 0.001 < mask.mean() < 0.1
+        else:
+            assert mask.sum() == 0
+
+
+def _annotation(tmp_path, image: np.ndarray, extra: list[dict]) -> tuple:
+    path = tmp_path / "photo.png"
+    cv2.imwrite(str(path), image)
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    photo = {
+        "name": "wire",
+        "path": str(path),
+        "debian_package": "pkg-a",
+        "sha256": digest,
+        "size_px": [30, 40],
+        "description": "a horizontal wire 3 px wide on rows 14-16 (at 30x40)",
+        "wires": [{"points_px": [[0, 15], [39, 15]], "width_px": 3.0}],
+    }
+    doc = {"about": "test", "photos": [photo, *extra]}
+    file = tmp_path / "labels.json"
+    file.write_text(json.dumps(doc))
+    return file, digest
+
+
+def test_real_photos_writes_resized_images_and_masks_and_skips_missing_or_changed(tmp_path):
+    image = np.full((60, 80, 3), 200, np.uint8)
+    changed = tmp_path / "changed.png"
+    cv2.imwrite(str(changed), image)
+    others = [
+        {
+            "name": "gone",
+            "path": str(tmp_path / "nope.jpg"),
+            "debian_package": "pkg-b",
+            "sha256": "0" * 64,
+            "size_px": [30, 40],
+            "description": "",
+            "wires": [],
+        },
+        {
+            "name": "edited",
+            "path": str(changed),
+            "debian_package": "pkg-a",
+            "sha256": "1" * 64,
+            "size_px": [30, 40],
+            "description": "",
+            "wires": [],
+        },
+    ]
+    labels, _ = _annotation(tmp_path, image, others)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["real-photos", "--out", str(out), "--annotations", str(labels)])
+    assert result.exit_code == 0, result.output
+    assert "wrote 1 labelled photos" in result.output
+    assert "skipped gone" in result.output and "apt-get install pkg-b" in result.output
+    assert "skipped edited" in result.output and "is not the labelled file" in result.output
+    written = cv2.imread(str(out / "images" / "wire.png"))
+    mask = cv2.imread(str(out / "masks" / "wire.png"), cv2.IMREAD_GRAYSCALE)
+    assert written.shape == (30, 40, 3) and mask.shape == (30, 40)
+    rows = np.flatnonzero(mask.max(axis=1))
+    assert rows.tolist() == [14, 15, 16] and (mask[14:17] == 255).all()
+    assert sorted(p.name for p in (out / "images").iterdir()) == ["wire.png"]
+
+
+def test_real_photos_with_nothing_installed_is_a_usage_error(tmp_path):
+    doc = {
+        "about": "",
+        "photos": [
+            {
+                "name": "gone",
+                "path": str(tmp_path / "nope.jpg"),
+                "debian_package": "pkg-b",
+                "sha256": "0" * 64,
+                "size_px": [30, 40],
+                "description": "",
+                "wires": [],
+            }
+        ],
+    }
+    labels = tmp_path / "labels.json"
+    labels.write_text(json.dumps(doc))
+    result = runner.invoke(
+        app, ["real-photos", "--out", str(tmp_path / "o"), "--annotations", str(labels)]
+    )
+    assert result.exit_code == 2 and "none of the labelled photos is installed" in result.output
+
+
+def test_labelled_and_wire_photos_never_become_training_backgrounds(tmp_path):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for name in ("a", "b", "c"):
+        cv2.imwrite(str(folder / f"{name}.png"), rng.integers(0, 255, (80, 96, 3), np.uint8))
+    digest = hashlib.sha256((folder / "b.png").read_bytes()).hexdigest()
+    pool = PhotoPool.load([str(folder)], excluded=frozenset({digest}))
+    assert pool.names == [f"{folder}:a.png", f"{folder}:c.png"]
+    committed = training_exclusions()
+    doc = json.loads(ANNOTATIONS.read_text())
+    assert committed == {p["sha256"] for p in doc["photos"] + doc["unlabelled_wires"]}
+    assert len(PhotoPool.load([str(folder)]).names) == 3  # nothing here is in the committed set
