@@ -41,6 +41,19 @@ def test_committed_labels_lie_inside_their_photos_and_mark_thin_lines():
             assert mask.sum() == 0
 
 
+def unlabelled_entry(name: str, path, package: str, sha256: str) -> dict:
+    """An annotation entry of a 30x40 photo without wires."""
+    return {
+        "name": name,
+        "path": str(path),
+        "debian_package": package,
+        "sha256": sha256,
+        "size_px": [30, 40],
+        "description": "",
+        "wires": [],
+    }
+
+
 def _annotation(tmp_path, image: np.ndarray, extra: list[dict]) -> tuple:
     path = tmp_path / "photo.png"
     cv2.imwrite(str(path), image)
@@ -65,24 +78,8 @@ def test_real_photos_writes_resized_images_and_masks_and_skips_missing_or_change
     changed = tmp_path / "changed.png"
     cv2.imwrite(str(changed), image)
     others = [
-        {
-            "name": "gone",
-            "path": str(tmp_path / "nope.jpg"),
-            "debian_package": "pkg-b",
-            "sha256": "0" * 64,
-            "size_px": [30, 40],
-            "description": "",
-            "wires": [],
-        },
-        {
-            "name": "edited",
-            "path": str(changed),
-            "debian_package": "pkg-a",
-            "sha256": "1" * 64,
-            "size_px": [30, 40],
-            "description": "",
-            "wires": [],
-        },
+        unlabelled_entry("gone", tmp_path / "nope.jpg", "pkg-b", "0" * 64),
+        unlabelled_entry("edited", changed, "pkg-a", "1" * 64),
     ]
     labels, _ = _annotation(tmp_path, image, others)
     out = tmp_path / "out"
@@ -100,20 +97,7 @@ def test_real_photos_writes_resized_images_and_masks_and_skips_missing_or_change
 
 
 def test_real_photos_with_nothing_installed_is_a_usage_error(tmp_path):
-    doc = {
-        "about": "",
-        "photos": [
-            {
-                "name": "gone",
-                "path": str(tmp_path / "nope.jpg"),
-                "debian_package": "pkg-b",
-                "sha256": "0" * 64,
-                "size_px": [30, 40],
-                "description": "",
-                "wires": [],
-            }
-        ],
-    }
+    doc = {"about": "", "photos": [unlabelled_entry("gone", tmp_path / "x.jpg", "pkg-b", "0" * 64)]}
     labels = tmp_path / "labels.json"
     labels.write_text(json.dumps(doc))
     result = runner.invoke(
