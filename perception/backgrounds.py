@@ -61,8 +61,8 @@ class PhotoPool:
         Photos whose SHA-256 is in `excluded` are left out; by default, the real-photo test set
         and photos with unlabelled wires (`perception.real_photos.training_exclusions`).
         """
-        if excluded is None:
-            from perception.real_photos import training_exclusions  # it imports this module
+        if excluded is None:  # imported here: real_photos imports this module via synthetic
+            from perception.real_photos import training_exclusions
 
             excluded = training_exclusions()
         images, names = [], []

@@ -194,3 +194,17 @@ def test_labels_lie_on_the_rendered_wires_and_bound_the_exact_metric():
     # an ideal detector of the rendering scores ~1 at pixel-exact matching: the label is what is
     # drawn (with centreline-only labels, a 1-px wire straddling two pixels held this to 0.87)
     assert coverage_ceiling_ap(masks, coverages) > 0.98
+
+
+@pytest.mark.parametrize(
+    ("row_px", "width_px", "rows"),
+    [(10.0, 0.3, [10]), (10.5, 1.0, [10, 11]), (10.5, 4.0, [9, 10, 11, 12])],
+)
+def test_label_is_the_centreline_plus_the_pixels_the_wire_covers_at_least_half(
+    row_px, width_px, rows
+):
+    segments = np.array([[[0.0, row_px], [39.0, row_px]]])
+    coverage = rasterise(segments, np.array([width_px]), 24, 40, 4)
+    mask = label_mask(segments, coverage)
+    assert np.flatnonzero(mask.max(axis=1)).tolist() == rows  # sub-pixel: 1 px; straddling: both
+    assert (mask[rows, 1:-1] == 1).all() and (coverage[mask == 0] < 0.5).all()
