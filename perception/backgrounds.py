@@ -68,9 +68,12 @@ class PhotoPool:
         images, names = [], []
         for source in sources:
             for path in _source_files(source):
-                if hashlib.sha256(path.read_bytes()).hexdigest() in excluded:
+                data = path.read_bytes()
+                if hashlib.sha256(data).hexdigest() in excluded:
                     continue
-                bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+                bgr = (
+                    cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
+                )
                 if bgr is None or min(bgr.shape[:2]) < 64:
                     continue
                 scale = min(1.0, 1024 / max(bgr.shape[:2]))

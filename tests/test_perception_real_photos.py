@@ -112,6 +112,8 @@ def test_labelled_and_wire_photos_never_become_training_backgrounds(tmp_path):
     rng = np.random.default_rng(0)
     for name in ("a", "b", "c"):
         cv2.imwrite(str(folder / f"{name}.png"), rng.integers(0, 255, (80, 96, 3), np.uint8))
+    (folder / "empty.png").write_bytes(b"")  # unreadable files are skipped, not fatal
+    (folder / "broken.jpg").write_bytes(b"not a jpeg")
     digest = hashlib.sha256((folder / "b.png").read_bytes()).hexdigest()
     pool = PhotoPool.load([str(folder)], excluded=frozenset({digest}))
     assert pool.names == [f"{folder}:a.png", f"{folder}:c.png"]
