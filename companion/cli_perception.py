@@ -310,10 +310,10 @@ def bench_perception(
 
     from perception.bench import conv_flops, measure_latency, sgemm_gflops
     from perception.checkpoint import load_checkpoint
-    from perception.params import PerceptionParams
+    from perception.params import DEFAULT_MODEL, PerceptionParams
     from perception.runtimes import available_runtimes, cpu_threads
     from perception.segmenter import WireSegmenter
-    from perception.zoo import DEFAULT_MODEL, build_model
+    from perception.zoo import build_model
 
     n_threads = cpu_threads(threads)
     try:

@@ -10,7 +10,10 @@ from typing import Annotated
 
 import typer
 
-DEFAULT_MODEL = "k32-k32-d1-d2-d4-d8-d16-d1-k2"  # = perception.zoo.DEFAULT_MODEL (no torch import)
+from perception.params import DEFAULT_MODEL, SyntheticParams, TrainingParams
+
+_TRAINING = TrainingParams()  # the option defaults below come from the typed params
+_SYNTHETIC = SyntheticParams()
 PhotosOption = Annotated[
     list[str] | None,
     typer.Option(
@@ -22,7 +25,7 @@ PhotosOption = Annotated[
 
 def _photos(photos: list[str] | None) -> tuple[str, ...]:
     """Photo sources, 'skimage' by default."""
-    return tuple(photos) if photos else ("skimage",)
+    return tuple(photos or _TRAINING.photo_sources)
 
 
 def _hw(text: str) -> tuple[int, int]:
@@ -120,27 +123,43 @@ def real_photos(
 
 def train(
     model: Annotated[str, typer.Option(help="zoo name or grid label")] = DEFAULT_MODEL,
-    steps: Annotated[int, typer.Option(min=1, help="optimiser steps")] = 2000,
-    batch: Annotated[int, typer.Option(min=1, help="images per step and process")] = 8,
-    crop: Annotated[str, typer.Option(help="training image size HxW, px")] = "176x240",
-    input_mode: Annotated[str, typer.Option("--input", help="rgb or rgble (2.3.4)")] = "rgb",
-    optimizer: Annotated[str, typer.Option(help="adam or adadelta (2.4.2)")] = "adam",
-    lr: Annotated[float, typer.Option(help="learning rate; 0 = optimiser default")] = 0.0,
+    steps: Annotated[int, typer.Option(min=1, help="optimiser steps")] = _TRAINING.steps,
+    batch: Annotated[
+        int, typer.Option(min=1, help="images per step and process")
+    ] = _TRAINING.batch,
+    crop: Annotated[str, typer.Option(help="training image size HxW, px")] = (
+        f"{_TRAINING.crop_height_px}x{_TRAINING.crop_width_px}"
+    ),
+    input_mode: Annotated[
+        str, typer.Option("--input", help="rgb or rgble (2.3.4)")
+    ] = _TRAINING.input_mode,
+    optimizer: Annotated[str, typer.Option(help="adam or adadelta (2.4.2)")] = _TRAINING.optimizer,
+    lr: Annotated[float, typer.Option(help="learning rate; 0 = optimiser default")] = (
+        _TRAINING.learning_rate
+    ),
     final_lr_fraction: Annotated[
         float, typer.Option(help="cosine decay of the learning rate down to this fraction")
-    ] = 0.1,
+    ] = _TRAINING.final_lr_fraction,
     balance_beta_max: Annotated[
         float, typer.Option(help="cap of the HED class-balance weight beta (2.3.3)")
-    ] = 0.99,
-    seed: Annotated[int, typer.Option(help="training data and initialisation seed")] = 0,
-    workers: Annotated[int, typer.Option(min=0, help="data-generation worker processes")] = 1,
+    ] = _TRAINING.balance_beta_max,
+    seed: Annotated[
+        int, typer.Option(help="training data and initialisation seed")
+    ] = _TRAINING.seed,
+    workers: Annotated[int, typer.Option(min=0, help="data-generation worker processes")] = (
+        _TRAINING.workers
+    ),
     photos: PhotosOption = None,
     photo_probability: Annotated[
         float, typer.Option(min=0, max=1, help="share of backgrounds that are real photos")
-    ] = 0.3,
-    checkpoint_every: Annotated[int, typer.Option(min=1, help="steps between checkpoints")] = 200,
-    eval_count: Annotated[int, typer.Option(min=0, help="held-out images evaluated")] = 64,
-    bf16: Annotated[bool, typer.Option(help="bf16 autocast where supported")] = True,
+    ] = _SYNTHETIC.photo_probability,
+    checkpoint_every: Annotated[int, typer.Option(min=1, help="steps between checkpoints")] = (
+        _TRAINING.checkpoint_every
+    ),
+    eval_count: Annotated[
+        int, typer.Option(min=0, help="held-out images evaluated")
+    ] = _TRAINING.eval_count,
+    bf16: Annotated[bool, typer.Option(help="bf16 autocast where supported")] = _TRAINING.bf16,
     out: Annotated[Path, typer.Option(help="checkpoint .pt; metrics JSON beside it")] = Path(
         "wire-model.pt"
     ),
@@ -148,7 +167,6 @@ def train(
 ) -> None:
     """Train a zoo model on on-the-fly synthetic wires (2.3.3); torchrun for DDP."""
     from perception.checkpoint import write_metrics_json
-    from perception.params import SyntheticParams, TrainingParams
     from perception.training import train as run_training
 
     h, w = _hw(crop)

@@ -19,7 +19,8 @@ import torch
 from torch import nn
 
 from perception.inputs import NORMALISATION, input_channels
-from perception.zoo import DEFAULT_MODEL, build_model
+from perception.params import DEFAULT_MODEL
+from perception.zoo import build_model
 
 FORMAT = "wireavoid-checkpoint-1"
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"

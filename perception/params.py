@@ -4,15 +4,15 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+DEFAULT_MODEL = "k32-k32-d1-d2-d4-d8-d16-d1-k2"  # the shipped architecture (2.3.1, Table 2.3)
+
 
 class PerceptionParams(BaseModel):
     """Wire-segmentation parameters; each field names its unit and thesis reference."""
 
     model_config = ConfigDict(extra="forbid")
 
-    model: str = Field(
-        "k32-k32-d1-d2-d4-d8-d16-d1-k2", description="architecture name of the zoo (2.3.1)"
-    )
+    model: str = Field(DEFAULT_MODEL, description="architecture name of the zoo (2.3.1)")
     confidence_threshold: float = Field(
         0.95, gt=0, lt=1, description="wire-probability threshold of the mask (4.4.1)"
     )
@@ -130,7 +130,7 @@ class TrainingParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    model: str = Field("k32-k32-d1-d2-d4-d8-d16-d1-k2", description="zoo name or grid label")
+    model: str = Field(DEFAULT_MODEL, description="zoo name or grid label")
     input_mode: str = Field("rgb", pattern="^(rgb|rgble)$", description="network input (2.3.4)")
     steps: int = Field(2000, ge=1, description="optimiser steps (thesis: 2000 at batch 4, 2.4.2)")
     batch: int = Field(8, ge=1, le=1024, description="images per step and process")

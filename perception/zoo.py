@@ -24,8 +24,6 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-DEFAULT_MODEL = "k32-k32-d1-d2-d4-d8-d16-d1-k2"
-
 FRONT_ENDS: dict[str, str] = {
     "f1": "k64-k64-p2-k128-k128",
     "f2": "k32-k32-k64-k64",
