@@ -6,7 +6,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup sim test lint
+# Debian packages that ship the labelled real photographs the tests run the wire model on
+# (perception/data/real_wires.json); installed with apt-get as root, else with sudo.
+PHOTO_PACKAGES := lomiri-wallpapers-16.04 plasma-workspace-wallpapers
+SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
+
+.PHONY: setup sim test lint photos
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,7 +25,15 @@ setup: $(STAMP)
 sim: $(STAMP)
 	$(BIN)/wireavoid fly-pattern
 
-test: $(STAMP)
+photos:
+	@installed=$$(dpkg-query -W -f='$${Status}\n' $(PHOTO_PACKAGES) 2>/dev/null \
+	  | grep -cx 'install ok installed'); \
+	[ "$$installed" = $(words $(PHOTO_PACKAGES)) ] || { \
+	  $(SUDO) apt-get update -qq && \
+	  $(SUDO) env DEBIAN_FRONTEND=noninteractive \
+	    apt-get install -y -qq --no-install-recommends $(PHOTO_PACKAGES) >/dev/null; }
+
+test: $(STAMP) photos
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 
