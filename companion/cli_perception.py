@@ -73,17 +73,14 @@ def image_mask_pairs(folder: Path) -> tuple[list[tuple[Path, Path]], list[Path]]
 
 def resolve_checkpoint(model: str | None) -> Path:
     """Checkpoint path of a --model value (file, or zoo name/label with shipped weights)."""
-    from perception.checkpoint import WEIGHTS_DIR, default_checkpoint_path
-    from perception.zoo import resolve_name
+    from perception.checkpoint import default_checkpoint_path, shipped_checkpoint_path
 
     if model is None:
         path = default_checkpoint_path()
     elif Path(model).is_file():
         return Path(model)
     else:
-        name = resolve_name(model)
-        shipped = [WEIGHTS_DIR / f"{name}_{mode}.pt" for mode in ("rgb", "rgble")]
-        path = next((p for p in shipped if p.is_file()), shipped[0])
+        path = shipped_checkpoint_path(model)
     if not path.is_file():
         raise typer.BadParameter(f"no checkpoint at {path}; train one with `wireavoid train`")
     return path
@@ -358,11 +355,17 @@ def bench_perception(
                 "ratio_to_fp32_peak": round(gflops / peak_gflops, 3),
             }
     default = results[default_runtime]["240x320"]
+    fastest = min(results, key=lambda name: results[name]["480x640"]["latency_ms"])
     report = {
         "default_model": arch,
         "default_runtime": default_runtime,
         "latency_ms_240x320": default["latency_ms"],
         "ratio_to_fp32_peak_240x320": default["ratio_to_fp32_peak"],
+        "fastest_480x640": {
+            "runtime": fastest,
+            "latency_ms": results[fastest]["480x640"]["latency_ms"],
+            "rate_hz": results[fastest]["480x640"]["rate_hz"],
+        },
         "input_mode": mode,
         "weights": weights,
         "threads": n_threads,

@@ -153,6 +153,10 @@ def train(
     photo_probability: Annotated[
         float, typer.Option(min=0, max=1, help="share of backgrounds that are real photos")
     ] = _SYNTHETIC.photo_probability,
+    contrast_min: Annotated[
+        float,
+        typer.Option(min=0, max=1, help="least wire-background luminance difference (0-1)"),
+    ] = _SYNTHETIC.contrast_min,
     checkpoint_every: Annotated[int, typer.Option(min=1, help="steps between checkpoints")] = (
         _TRAINING.checkpoint_every
     ),
@@ -164,6 +168,10 @@ def train(
         "wire-model.pt"
     ),
     resume: Annotated[bool, typer.Option(help="continue from the checkpoint at --out")] = False,
+    init_from: Annotated[
+        Path | None,
+        typer.Option(help="start from this checkpoint's weights (same shapes, layer by layer)"),
+    ] = None,
 ) -> None:
     """Train a zoo model on on-the-fly synthetic wires (2.3.3); torchrun for DDP."""
     from perception.checkpoint import write_metrics_json
@@ -187,9 +195,10 @@ def train(
         checkpoint_every=checkpoint_every,
         eval_count=eval_count,
         bf16=bf16,
+        init_from=str(init_from or ""),
     )
     command = "wireavoid " + shlex.join(sys.argv[1:])
-    synthetic = SyntheticParams(photo_probability=photo_probability)
+    synthetic = SyntheticParams(photo_probability=photo_probability, contrast_min=contrast_min)
     summary = run_training(params, out, resume=resume, synthetic=synthetic, command=command)
     if _rank0():
         record = {

@@ -20,15 +20,26 @@ from torch import nn
 
 from perception.inputs import NORMALISATION, input_channels
 from perception.params import DEFAULT_MODEL
-from perception.zoo import build_model
+from perception.zoo import build_model, resolve_name
 
 FORMAT = "wireavoid-checkpoint-1"
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
 
+def shipped_checkpoint_path(model: str) -> Path:
+    """Path of the shipped weights of a zoo name or grid label (RGB before RGBLE).
+
+    The path may not exist: only the default model and its pooled variant
+    (`FAST_MODEL`) ship weights.
+    """
+    name = resolve_name(model)
+    shipped = [WEIGHTS_DIR / f"{name}_{mode}.pt" for mode in ("rgb", "rgble")]
+    return next((p for p in shipped if p.is_file()), shipped[0])
+
+
 def default_checkpoint_path() -> Path:
     """Path of the shipped default model: k32-k32-d1-d2-d4-d8-d16-d1-k2, RGB, synthetic-trained."""
-    return WEIGHTS_DIR / f"{DEFAULT_MODEL}_rgb.pt"
+    return shipped_checkpoint_path(DEFAULT_MODEL)
 
 
 def metrics_path(checkpoint_path: str | os.PathLike) -> Path:
@@ -70,6 +81,23 @@ def save_checkpoint(
     torch.save(payload, tmp)
     tmp.replace(path)
     return path
+
+
+def warm_start(model: nn.Module, path: str | os.PathLike, input_mode: str) -> nn.Module:
+    """Load a checkpoint's weights into `model` tensor by tensor, in layer order.
+
+    The architectures may differ in their parameter-free layers (a `p2` pool moves the
+    Sequential's indices), but every weight and bias must match in shape; ValueError otherwise.
+    """
+    payload = read_checkpoint(path)
+    if payload["input_mode"] != input_mode:
+        raise ValueError(f"{path} takes {payload['input_mode']} input, not {input_mode}")
+    target, source = model.state_dict(), list(payload["state_dict"].values())
+    shapes = [tuple(v.shape) for v in target.values()], [tuple(v.shape) for v in source]
+    if shapes[0] != shapes[1]:
+        raise ValueError(f"{path} ({payload['arch']}) has weights {shapes[1]}, need {shapes[0]}")
+    model.load_state_dict(dict(zip(target, source, strict=True)))
+    return model
 
 
 def read_checkpoint(path: str | os.PathLike) -> dict[str, Any]:

@@ -5,6 +5,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 DEFAULT_MODEL = "k32-k32-d1-d2-d4-d8-d16-d1-k2"  # the shipped architecture (2.3.1, Table 2.3)
+FAST_MODEL = "k32-k32-p2-d1-d2-d4-d8-d16-d1-k2"  # its pooled variant, shipped for 480x640 frames
 
 
 class PerceptionParams(BaseModel):
@@ -12,7 +13,11 @@ class PerceptionParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    model: str = Field(DEFAULT_MODEL, description="architecture name of the zoo (2.3.1)")
+    model: str = Field(
+        DEFAULT_MODEL,
+        description="zoo architecture whose shipped weights the segmenter loads (2.3.1): "
+        f"{DEFAULT_MODEL}, or {FAST_MODEL} for 480x640 frames at >= 10 Hz on a CPU",
+    )
     confidence_threshold: float = Field(
         0.95, gt=0, lt=1, description="wire-probability threshold of the mask (4.4.1)"
     )
@@ -160,6 +165,11 @@ class TrainingParams(BaseModel):
         "the held-out set uses seed 1,000,000",
     )
     checkpoint_every: int = Field(200, ge=1, description="steps between checkpoints")
+    init_from: str = Field(
+        "",
+        description="checkpoint whose weights start a fresh run, layer by layer in order "
+        "(e.g. a pooled variant warm-started from its unpooled twin); '' = random init",
+    )
     workers: int = Field(1, ge=0, le=64, description="data-generation worker processes")
     bf16: bool = Field(True, description="bf16 autocast where the CPU/GPU supports it")
     photo_sources: list[str] = Field(

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from torch import nn
 
-from perception.checkpoint import load_checkpoint
+from perception.checkpoint import load_checkpoint, shipped_checkpoint_path
 from perception.inputs import NORMALISATION, input_channels, network_input
 from perception.params import PerceptionParams
 from perception.postprocess import wire_mask
@@ -67,13 +67,18 @@ class WireSegmenter:
         params: PerceptionParams | None = None,
         cache_dir: Path | None = None,
     ) -> WireSegmenter:
-        """Segmenter of a checkpoint (None: the shipped default model).
+        """Segmenter of a checkpoint (None: the shipped weights of `params.model`).
 
         runtime: 'auto' | 'torch' | 'onnx' | 'tensorrt'; None takes `params.runtime`.
         cache_dir: where ONNX exports/TensorRT engines are cached (default ~/.cache/wireavoid).
-        Raises ValueError when the checkpoint's input normalisation is not the one
-        `perception.inputs` applies.
+        Raises ValueError when `params.model` has no shipped weights, or when the checkpoint's
+        input normalisation is not the one `perception.inputs` applies.
         """
+        params = params or PerceptionParams()
+        if checkpoint is None:
+            checkpoint = shipped_checkpoint_path(params.model)
+            if not checkpoint.is_file():
+                raise ValueError(f"no shipped weights for {params.model} (perception.model)")
         model, meta = load_checkpoint(checkpoint)
         mode = meta["input_mode"]
         expected = {k: list(v[: input_channels(mode)]) for k, v in NORMALISATION.items()}

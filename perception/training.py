@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from perception.checkpoint import read_checkpoint, save_checkpoint
+from perception.checkpoint import read_checkpoint, save_checkpoint, warm_start
 from perception.inputs import input_channels, network_input
 from perception.losses import class_balanced_cross_entropy
 from perception.params import SyntheticParams, TrainingParams
@@ -183,6 +183,8 @@ def train(
             optimizer.load_state_dict(payload["optimizer_state"])
         start = int(payload["training"].get("step", 0))
         history = list(payload["training"].get("loss_history", []))
+    elif params.init_from:
+        warm_start(model, params.init_from, params.input_mode)
     net: nn.Module = model
     if world > 1:
         net = nn.parallel.DistributedDataParallel(

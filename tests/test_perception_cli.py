@@ -119,6 +119,11 @@ def test_bench_perception_json(tmp_path, monkeypatch):
     assert report["gflop_per_frame"]["480x640"] == pytest.approx(
         4 * report["gflop_per_frame"]["240x320"], rel=1e-4
     )
+    fastest = report["fastest_480x640"]
+    assert fastest["latency_ms"] == min(
+        r["480x640"]["latency_ms"] for r in report["runtimes"].values()
+    )
+    assert report["runtimes"][fastest["runtime"]]["480x640"]["rate_hz"] == fastest["rate_hz"]
     for per_size in report["runtimes"].values():
         assert set(per_size) == {"240x320", "480x640"}
         row = per_size["240x320"]
