@@ -30,7 +30,7 @@ ModelOption = Annotated[
     typer.Option(
         "--model",
         help="checkpoint file, or a zoo name/grid label with weights in perception/weights; "
-        "default: the shipped default model",
+        "default: the shipped weights of perception.model (WIREAVOID_PERCEPTION__MODEL)",
     ),
 ]
 RuntimeOption = Annotated[
@@ -73,10 +73,11 @@ def image_mask_pairs(folder: Path) -> tuple[list[tuple[Path, Path]], list[Path]]
 
 def resolve_checkpoint(model: str | None) -> Path:
     """Checkpoint path of a --model value (file, or zoo name/label with shipped weights)."""
-    from perception.checkpoint import default_checkpoint_path, shipped_checkpoint_path
+    from companion.config import load_settings
+    from perception.checkpoint import shipped_checkpoint_path
 
     if model is None:
-        path = default_checkpoint_path()
+        path = shipped_checkpoint_path(load_settings().perception.model)
     elif Path(model).is_file():
         return Path(model)
     else:

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from companion.cli import app
 from companion.cli_perception import image_mask_pairs
 from perception.checkpoint import save_checkpoint
+from perception.params import FAST_MODEL
 from perception.segmenter import WireSegmenter
 
 runner = CliRunner(env={"COLUMNS": "400"})  # error panels unwrapped, for matching
@@ -96,6 +97,20 @@ def test_evaluate_prints_the_table_and_saves_the_pr_curve(tmp_path, checkpoint):
     assert 0.0 <= baseline_row["ods_f1"] <= 1.0
     png = (out / "pr_curve.png").read_bytes()
     assert png.startswith(b"\x89PNG")
+
+
+def test_evaluate_without_model_uses_the_shipped_weights_of_perception_model(tmp_path, monkeypatch):
+    data = tmp_path / "data"
+    write_dataset(data, "split")
+    args = ["evaluate", str(data), "--runtime", "torch", "--out", str(tmp_path / "eval")]
+    monkeypatch.setenv("WIREAVOID_PERCEPTION__MODEL", FAST_MODEL)
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    (row,) = json.loads((tmp_path / "eval" / "metrics.json").read_text())["rows"]
+    assert row["name"].startswith(FAST_MODEL)
+    monkeypatch.setenv("WIREAVOID_PERCEPTION__MODEL", "f3c2")  # a zoo model without weights
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and "no checkpoint at" in result.output
 
 
 def test_evaluate_rejects_a_folder_without_pairs(tmp_path, checkpoint):
