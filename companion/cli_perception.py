@@ -306,9 +306,10 @@ def bench_perception(
 
     import torch
 
+    from companion.config import load_settings
     from perception.bench import conv_flops, measure_latency, sgemm_gflops
     from perception.checkpoint import load_checkpoint
-    from perception.params import DEFAULT_MODEL, PerceptionParams
+    from perception.params import PerceptionParams
     from perception.runtimes import available_runtimes, cpu_threads
     from perception.segmenter import WireSegmenter
     from perception.zoo import build_model
@@ -320,7 +321,8 @@ def bench_perception(
     except typer.BadParameter:
         if model is not None and Path(model).is_file():
             raise
-        arch, mode, weights = model or DEFAULT_MODEL, "rgb", "random-init (no checkpoint)"
+        arch = model or load_settings().perception.model
+        mode, weights = "rgb", "random-init (no checkpoint)"
         net = build_model(arch)
     params = PerceptionParams(inference_threads=n_threads)
     default_runtime = WireSegmenter.from_model(net, mode, "auto", params).runtime.name
