@@ -10,33 +10,34 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 from torch import nn
 
 
 def conv_flops(model: nn.Module, height_px: int, width_px: int) -> int:
     """Floating-point operations of one forward pass, counted from the conv layers.
 
-    2 x (multiply-adds) + bias adds of every `Conv2d`, with the feature-map size tracked
-    through convolutions and max-pools in module order (the chain structure of the zoo's
-    models, thesis 2.3.1). ReLU, pooling, upsampling and the softmax are not counted.
+    2 x (multiply-adds) + bias adds of every `Conv2d`, at the output size each one has in a
+    forward pass of a (1, C, height_px, width_px) input (so a skip at full resolution counts
+    at full resolution). ReLU, pooling, upsampling and the softmax are not counted.
     """
-    h, w, flops = height_px, width_px, 0
-    for module in model.modules():
-        if isinstance(module, nn.Conv2d):
-            kh, kw = module.kernel_size
-            (ph, pw), (dh, dw), (sh, sw) = module.padding, module.dilation, module.stride
-            h = (h + 2 * ph - dh * (kh - 1) - 1) // sh + 1
-            w = (w + 2 * pw - dw * (kw - 1) - 1) // sw + 1
-            macs_per_px = module.out_channels * (module.in_channels // module.groups) * kh * kw
-            flops += (2 * macs_per_px + (module.out_channels if module.bias is not None else 0)) * (
-                h * w
-            )
-        elif isinstance(module, nn.MaxPool2d):
-            k, s = module.kernel_size, module.stride
-            k, s = (k, k) if isinstance(k, int) else k, (s, s) if isinstance(s, int) else s
-            rnd = np.ceil if module.ceil_mode else np.floor
-            h = int(rnd((h - k[0]) / s[0])) + 1
-            w = int(rnd((w - k[1]) / s[1])) + 1
+    flops = 0
+
+    def count(module: nn.Conv2d, _inputs: tuple, output: torch.Tensor) -> None:
+        nonlocal flops
+        kh, kw = module.kernel_size
+        macs_per_px = module.out_channels * (module.in_channels // module.groups) * kh * kw
+        bias = module.out_channels if module.bias is not None else 0
+        flops += (2 * macs_per_px + bias) * output.shape[-2] * output.shape[-1]
+
+    convs = [m for m in model.modules() if isinstance(m, nn.Conv2d)]
+    hooks = [m.register_forward_hook(count) for m in convs]
+    try:
+        with torch.no_grad():
+            model(torch.zeros(1, convs[0].in_channels, height_px, width_px))
+    finally:
+        for hook in hooks:
+            hook.remove()
     return int(flops)
 
 

@@ -87,16 +87,20 @@ def warm_start(model: nn.Module, path: str | os.PathLike, input_mode: str) -> nn
     """Load a checkpoint's weights into `model` tensor by tensor, in layer order.
 
     The architectures may differ in their parameter-free layers (a `p2` pool moves the
-    Sequential's indices), but every weight and bias must match in shape; ValueError otherwise.
+    Sequential's indices), and `model` may add a skip (`-s`, `perception.zoo`) that the
+    checkpoint lacks, which then keeps its zero initialisation; every other weight and bias must
+    match in shape; ValueError otherwise.
     """
     payload = read_checkpoint(path)
     if payload["input_mode"] != input_mode:
         raise ValueError(f"{path} takes {payload['input_mode']} input, not {input_mode}")
-    target, source = model.state_dict(), list(payload["state_dict"].values())
-    shapes = [tuple(v.shape) for v in target.values()], [tuple(v.shape) for v in source]
+    target, source = model.state_dict(), payload["state_dict"]
+    if not any(k.startswith("skip.") for k in source):
+        target = {k: v for k, v in target.items() if not k.startswith("skip.")}
+    shapes = [tuple(v.shape) for v in target.values()], [tuple(v.shape) for v in source.values()]
     if shapes[0] != shapes[1]:
         raise ValueError(f"{path} ({payload['arch']}) has weights {shapes[1]}, need {shapes[0]}")
-    model.load_state_dict(dict(zip(target, source, strict=True)))
+    model.load_state_dict(dict(zip(target, source.values(), strict=True)), strict=False)
     return model
 
 

@@ -6,6 +6,11 @@ A name is a '-'-separated list of layers, all 3x3 convolutions (2.3.1):
 - ``p2``: 2x2 max-pool (the logits are bilinearly upsampled back to the input size),
 - ``dN``: context layer, a 3x3 convolution with dilation N keeping the channel count + ReLU
   (Yu and Koltun's context module), padded so that the feature map keeps its size.
+- ``s`` (beyond the thesis; only last, after ``k2``, in a model with a pool): a skip connection
+  as in FCN (Long et al. 2015). The full-resolution features entering the first pool give
+  logits of their own through a 3x3 convolution to 2 channels, added to the upsampled logits,
+  so that a pooled model places a wire to the pixel again. Zero-initialised: ``...-k2-s``
+  starts as exactly ``...-k2``.
 
 The grid of Table 2.1 stacks each context module c1-c5 over each front end f1-f6. The front
 ends f3, f4 and f5 follow the prose of 2.3.1 and the headers of Table 2.2 ("halve the channels
@@ -51,6 +56,8 @@ ZOO: dict[str, str] = {
 """All 30 grid models of Table 2.1: grid label (e.g. 'f6c5') -> architecture name."""
 
 _LAYER = re.compile(r"^([kpd])(\d+)$")
+SKIP = "s"
+"""Trailing token of a model with an FCN-style full-resolution skip (see module doc)."""
 
 
 class WireNet(nn.Module):
@@ -66,11 +73,14 @@ class WireNet(nn.Module):
         layers: list[nn.Module] = []
         channels = in_channels
         self.downsample = 1
+        self.skip: nn.Conv2d | None = None
+        skip_channels = 0
         tokens = parse_name(name)
         for i, (kind, value) in enumerate(tokens):
             last = i == len(tokens) - 1
             if kind == "p":
                 layers.append(nn.MaxPool2d(value, value, ceil_mode=True))
+                skip_channels = skip_channels or channels
                 self.downsample *= value
                 continue
             out = value if kind == "k" else channels
@@ -80,22 +90,39 @@ class WireNet(nn.Module):
                 layers.append(nn.ReLU(inplace=True))
             channels = out
         self.body = nn.Sequential(*layers)
+        if has_skip(name):
+            self.skip = nn.Conv2d(skip_channels, 2, 3, padding=1)
+            nn.init.zeros_(self.skip.weight)
+            nn.init.zeros_(self.skip.bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Logits (N, 2, H, W) of [not-wire, wire] at the input resolution."""
-        logits = self.body(x)
+        full_res = None
+        h = x
+        for layer in self.body:
+            if full_res is None and isinstance(layer, nn.MaxPool2d):
+                full_res = h
+            h = layer(h)
         if self.downsample > 1:
-            logits = F.interpolate(logits, size=x.shape[-2:], mode="bilinear", align_corners=False)
-        return logits
+            h = F.interpolate(h, size=x.shape[-2:], mode="bilinear", align_corners=False)
+        if self.skip is not None:
+            h = h + self.skip(full_res)
+        return h
 
 
 def parse_name(name: str) -> list[tuple[str, int]]:
     """Layers of a thesis model name as (kind, value) pairs; raises ValueError if malformed.
 
-    The name must end in ``k2`` (two-class logits, 2.3.1) and may not start with a context layer.
+    The name must end in ``k2`` (two-class logits, 2.3.1), or in ``k2-s`` with a skip (only
+    in a model with a pool), and may not start with a context layer. The ``s`` is not a layer.
     """
     tokens = []
-    for part in name.strip().split("-"):
+    parts = name.strip().split("-")
+    if has_skip(name):
+        parts = parts[:-1]
+        if not any(part.startswith("p") for part in parts):
+            raise ValueError(f"model name {name!r} has a skip ('-s') but no pool to skip")
+    for part in parts:
         match = _LAYER.match(part)
         if match is None or int(match.group(2)) < 1:
             raise ValueError(f"bad layer {part!r} in model name {name!r}")
@@ -105,6 +132,11 @@ def parse_name(name: str) -> list[tuple[str, int]]:
     if tokens[0][0] == "d":
         raise ValueError(f"model name {name!r} starts with a context layer: nothing to keep")
     return tokens
+
+
+def has_skip(name: str) -> bool:
+    """Whether a model name ends in the full-resolution skip token ``s`` (see module doc)."""
+    return name.strip().rsplit("-", 1)[-1] == SKIP
 
 
 def resolve_name(name_or_label: str) -> str:

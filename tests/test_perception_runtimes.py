@@ -85,6 +85,8 @@ def test_conv_flops_by_hand():
     # k8-p2-k2 at 5x5: conv 3->8 (2*216 + 8) * 25 = 11,000; ceil pool -> 3x3; conv 8->2
     # (2*144 + 2) * 9 = 2,610
     assert conv_flops(build_model("k8-p2-k2"), 5, 5) == 13_610
+    # its skip, conv 8->2 at the full 5x5: (2*144 + 2) * 25 = 7,250
+    assert conv_flops(build_model("k8-p2-k2-s"), 5, 5) == 13_610 + 7_250
     # the default model, 131,904 mult-add flops + 258 bias adds per pixel at 240x320
     assert conv_flops(build_model("k32-k32-d1-d2-d4-d8-d16-d1-k2"), 240, 320) == (
         (131_904 + 258) * 240 * 320

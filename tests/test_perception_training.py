@@ -139,6 +139,9 @@ def test_warm_start_moves_weights_across_a_pooling_layer(tmp_path):
     pooled = warm_start(build_model("k16-k16-p2-d1-d2-k2"), tmp_path / "flat.pt", "rgb")
     for a, b in zip(flat.parameters(), pooled.parameters(), strict=True):
         assert torch.equal(a, b)
+    skipped = warm_start(build_model("k16-k16-p2-d1-d2-k2-s"), tmp_path / "flat.pt", "rgb")
+    assert torch.equal(skipped.body[0].weight, flat.body[0].weight)
+    assert not skipped.skip.weight.any()  # a skip the checkpoint lacks stays zero
     with pytest.raises(ValueError, match="weights"):
         warm_start(build_model("k16-k32-d1-d2-k2"), tmp_path / "flat.pt", "rgb")
     with pytest.raises(ValueError, match="rgb input"):
@@ -172,10 +175,10 @@ def test_resume_continues_exactly_where_it_stopped(tmp_path):
 
 
 # Recorded at 240x320 on the 64 standard held-out images when the weights were shipped
-# (default 0.67 exact and 0.86 with 2 px of tolerance, the pooled fast model 0.60 and 0.87,
+# (default 0.67 exact and 0.86 with 2 px of tolerance, the pooled fast model 0.62 and 0.875,
 # against the 0.9); these bounds guard against regressions, here and on a quick
 # re-measurement.
-SHIPPED_HELD_OUT_AP = {DEFAULT_MODEL: (0.67, 0.86), FAST_MODEL: (0.60, 0.865)}
+SHIPPED_HELD_OUT_AP = {DEFAULT_MODEL: (0.67, 0.86), FAST_MODEL: (0.61, 0.87)}
 
 
 @pytest.mark.parametrize("arch", sorted(SHIPPED_HELD_OUT_AP))
@@ -190,7 +193,7 @@ def test_shipped_model_finds_held_out_synthetic_wires(arch):
     pairs = [synthetic_sample(HELD_OUT_SEED, i, 120, 160) for i in range(12)]
     metrics = evaluate_model(model, "rgb", [p[0] for p in pairs], [p[1] for p in pairs])
     assert metrics["roc_auc"] > 0.9
-    assert metrics["ap_tol2px"] > 0.88  # measured 0.91 (phase-4 weights: 0.88)
+    assert metrics["ap_tol2px"] > 0.88  # measured 0.91 (default), 0.94 (fast)
     assert metrics["ap_tol2px"] > metrics["ap"]
 
 

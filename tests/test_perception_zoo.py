@@ -61,7 +61,7 @@ def test_zoo_has_the_30_grid_models():
     assert grid_label("k32-k2") is None
 
 
-@pytest.mark.parametrize("name", ["f6c5", "f1c3", "k64-p2-k32-p2-k2", "f3c1"])
+@pytest.mark.parametrize("name", ["f6c5", "f1c3", "k64-p2-k32-p2-k2", "f3c1", "k8-p2-d2-k2-s"])
 @pytest.mark.parametrize(("h", "w"), [(37, 53), (16, 16), (9, 31)])
 def test_logits_have_input_resolution(name, h, w):
     model = build_model(name, in_channels=5).eval()
@@ -78,7 +78,22 @@ def test_dilated_layers_keep_channels_and_dilate():
     assert all(c.kernel_size == (3, 3) for c in convs)
 
 
-@pytest.mark.parametrize("bad", ["k32-d2", "k32-x3-k2", "d2-k2", "k0-k2", ""])
+def test_skip_adds_full_resolution_logits_that_start_at_zero():
+    pooled, skipped = build_model("k8-k8-p2-d1-k2"), build_model("k8-k8-p2-d1-k2-s")
+    # 8 full-resolution channels x 9 taps x 2 logits + 2 biases
+    assert parameter_count(skipped) == parameter_count(pooled) + 8 * 9 * 2 + 2
+    skipped.load_state_dict(pooled.state_dict(), strict=False)
+    x = torch.randn(1, 3, 21, 30)
+    with torch.no_grad():
+        assert torch.equal(pooled(x), skipped(x))  # zero-initialised: the same model at first
+        skipped.skip.bias.copy_(torch.tensor([0.0, 1.0]))
+        assert torch.allclose(skipped(x) - pooled(x), torch.tensor([0.0, 1.0])[:, None, None])
+    assert parameter_count(build_model("k32-k32-p2-d1-d2-d4-d8-d16-d1-k2-s")) == 66_210 + 578
+
+
+@pytest.mark.parametrize(
+    "bad", ["k32-d2", "k32-x3-k2", "d2-k2", "k0-k2", "", "k32-k2-s", "k32-p2-s-k2", "k8-p2-k2-s-s"]
+)
 def test_malformed_names_are_rejected(bad):
     with pytest.raises(ValueError):
         build_model(bad)
