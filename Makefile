@@ -8,10 +8,14 @@ STAMP := $(VENV)/.installed
 
 # Debian packages that ship the labelled real photographs the tests run the wire model on
 # (perception/data/real_wires.json); installed with apt-get as root, else with sudo.
-PHOTO_PACKAGES := lomiri-wallpapers-16.04 plasma-workspace-wallpapers
+PHOTO_PACKAGES := lomiri-wallpapers-16.04 lomiri-wallpapers-20.04 plasma-workspace-wallpapers
+# The ground-link tests run a real MQTT broker (mosquitto, its mosquitto_passwd), make TLS
+# certificates (openssl) and check the systemd unit (systemd-analyze).
+GROUND_PACKAGES := mosquitto openssl systemd
+TEST_PACKAGES := $(PHOTO_PACKAGES) $(GROUND_PACKAGES)
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: setup sim test lint photos
+.PHONY: setup sim test lint packages
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,19 +25,19 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# The main job: the most complete simulated flight available.
+# The main job: the whole stack flies the thesis' wire between two ladders (4.6.2) in simulation.
 sim: $(STAMP)
-	$(BIN)/wireavoid fly-pattern
+	$(BIN)/wireavoid sim --scenario ladder-wire
 
-photos:
-	@installed=$$(dpkg-query -W -f='$${Status}\n' $(PHOTO_PACKAGES) 2>/dev/null \
+packages:
+	@installed=$$(dpkg-query -W -f='$${Status}\n' $(TEST_PACKAGES) 2>/dev/null \
 	  | grep -cx 'install ok installed'); \
-	[ "$$installed" = $(words $(PHOTO_PACKAGES)) ] || { \
+	[ "$$installed" = $(words $(TEST_PACKAGES)) ] || { \
 	  $(SUDO) apt-get update -qq && \
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive \
-	    apt-get install -y -qq --no-install-recommends $(PHOTO_PACKAGES) >/dev/null; }
+	    apt-get install -y -qq --no-install-recommends $(TEST_PACKAGES) >/dev/null; }
 
-test: $(STAMP) photos
+test: $(STAMP) packages
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 

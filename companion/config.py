@@ -1,8 +1,10 @@
 """The one typed configuration of wireavoid: TOML file plus `WIREAVOID_*` environment overrides.
 
-Each core owns the model of its own tunables (`mapping.params`, `planning.params`,
-`perception.params`, `hil.params`) so that it stays importable without `companion`;
-this module composes them into one `Settings` tree, the only place defaults live.
+Each core owns the model of its own tunables (`perception.params`, `mapping.droan.params`,
+`mapping.catenary.params`, `planning.params`) so that it stays importable without `companion`;
+this module composes them, with the link's and the service's, into the flight process'
+`Settings` tree, the only place defaults live. The commands extend it with the simulator's
+sections (`companion.cli.settings.SimSettings`); the flight process never sees those.
 Environment variables override the file: `WIREAVOID_MAPPING__ROBOT_RADIUS_M=0.4`.
 """
 
@@ -12,107 +14,20 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
+from companion.flight.params import FlightParams
+from companion.ground.params import GeofenceParams, GroundParams
+from companion.ingest.params import CameraParams
+from companion.link.params import LinkParams
+from companion.mission import MissionParams
+from companion.record.params import RecordParams
 from companion.service_params import ServiceParams
-from hil.camera_params import CameraSimParams
-from hil.params import VehicleSimParams
-from mapping.catenary_params import CatenaryParams
-from mapping.params import MappingParams
+from mapping.catenary.params import CatenaryParams
+from mapping.droan.params import MappingParams
 from perception.params import PerceptionParams
 from planning.params import PlanningParams
-
-
-class LinkParams(BaseModel):
-    """The MAVSDK flight link to PX4 (`companion.vehicle_link`)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    connection_url: str = Field(
-        "udpin://0.0.0.0:14540",
-        description="MAVSDK connection URL: udpin://HOST:PORT, udpout://HOST:PORT, serial://DEV:BAUD",
-    )
-    connect_timeout_s: float = Field(
-        15.0, gt=0, le=600, description="time to discover the autopilot after connecting, s"
-    )
-    health_timeout_s: float = Field(
-        30.0, gt=0, le=600, description="time for local position, home and pre-arm checks, s"
-    )
-    telemetry_rate_hz: float = Field(
-        30.0, ge=1, le=250, description="rate requested for pose/velocity/attitude streams, Hz"
-    )
-    setpoint_rate_hz: float = Field(
-        20.0, ge=20, le=100, description="rate our setpoints are streamed at (PX4 wants >= 2), Hz"
-    )
-    setpoint_max_age_s: float = Field(
-        0.3,
-        gt=0,
-        le=2,
-        description="planner output older than this trips the watchdog: brake, then Hold, s",
-    )
-    brake_timeout_s: float = Field(
-        2.0, gt=0, le=10, description="longest zero-velocity brake before switching to Hold, s"
-    )
-    brake_speed_mps: float = Field(
-        0.2, gt=0, le=2, description="speed below which braking is done and Hold is requested, m/s"
-    )
-    offboard_prestream_s: float = Field(
-        0.7, ge=0.5, le=2, description="setpoints streamed before requesting offboard, s"
-    )
-    offboard_confirm_timeout_s: float = Field(
-        2.5,
-        gt=0,
-        le=10,
-        description="time for the heartbeat to report OFFBOARD after the request (1 Hz), s",
-    )
-    offboard_settle_s: float = Field(
-        1.2,
-        ge=0,
-        le=5,
-        description="OFFBOARD must still be reported this long after it was confirmed: covers "
-        "PX4's end-of-takeoff Hold landing just after the switch (> 1 heartbeat period), s",
-    )
-    offboard_attempts: int = Field(3, ge=1, le=10, description="offboard entry attempts")
-    arm_attempts: int = Field(
-        10, ge=1, le=100, description="arming attempts (PX4 denies arming early after boot)"
-    )
-    arm_confirm_timeout_s: float = Field(
-        3.0, gt=0, le=30, description="time for the heartbeat to report armed after an ACK, s"
-    )
-    arm_retry_interval_s: float = Field(
-        1.0, gt=0, le=10, description="pause between denied arming attempts, s"
-    )
-    takeoff_altitude_m: float = Field(
-        3.0, ge=1, le=100, description="takeoff altitude above home, m"
-    )
-    takeoff_timeout_s: float = Field(
-        30.0, gt=0, le=300, description="time to reach takeoff altitude and settle in Hold, s"
-    )
-    altitude_tolerance_m: float = Field(
-        0.5, gt=0, le=5, description="altitude error accepted as 'reached' after takeoff, m"
-    )
-    land_timeout_s: float = Field(
-        60.0, gt=0, le=600, description="time to touch down and disarm after Land, s"
-    )
-    link_loss_timeout_s: float = Field(
-        2.0,
-        gt=0,
-        le=30,
-        description="no telemetry for this long means the link is lost, s",
-    )
-    reconnect_soft_s: float = Field(
-        4.0,
-        ge=0,
-        le=60,
-        description="wait for MAVSDK to recover the link itself before rebuilding it, s",
-    )
-    reconnect_interval_s: float = Field(
-        2.0, gt=0, le=60, description="pause between attempts to rebuild a lost link, s"
-    )
-    reconnect_max_attempts: int = Field(
-        0, ge=0, description="link rebuild attempts before giving up; 0 means never give up"
-    )
 
 
 class Settings(BaseSettings):
@@ -124,12 +39,16 @@ class Settings(BaseSettings):
 
     link: LinkParams = Field(default_factory=LinkParams)
     service: ServiceParams = Field(default_factory=ServiceParams)
+    mission: MissionParams = Field(default_factory=MissionParams)
+    flight: FlightParams = Field(default_factory=FlightParams)
+    camera: CameraParams = Field(default_factory=CameraParams)
     perception: PerceptionParams = Field(default_factory=PerceptionParams)
     mapping: MappingParams = Field(default_factory=MappingParams)
     catenary: CatenaryParams = Field(default_factory=CatenaryParams)
     planning: PlanningParams = Field(default_factory=PlanningParams)
-    vehicle_sim: VehicleSimParams = Field(default_factory=VehicleSimParams)
-    camera_sim: CameraSimParams = Field(default_factory=CameraSimParams)
+    ground: GroundParams = Field(default_factory=GroundParams)
+    geofence: GeofenceParams = Field(default_factory=GeofenceParams)
+    record: RecordParams = Field(default_factory=RecordParams)
 
     @classmethod
     def settings_customise_sources(
@@ -144,8 +63,9 @@ class Settings(BaseSettings):
         return env_settings, init_settings
 
 
-def load_settings(path: Path | None = None) -> Settings:
-    """Settings from the TOML file at `path` (defaults when None) with environment overrides.
+def load_settings(path: Path | None = None, model: type[Settings] = Settings) -> Settings:
+    """Settings of type `model` from the TOML file at `path` (defaults when None) with
+    environment overrides.
 
     Raises `pydantic.ValidationError` naming the offending key on an unknown key or a value
     out of bounds, and `FileNotFoundError` when `path` does not exist.
@@ -154,4 +74,4 @@ def load_settings(path: Path | None = None) -> Settings:
     if path is not None:
         with Path(path).open("rb") as f:
             values = tomllib.load(f)
-    return Settings(**values)
+    return model(**values)

@@ -1,23 +1,26 @@
 """The companion service: the process systemd starts at boot on the drone's Jetson.
 
-Today it supervises only. It opens the MAVSDK link (`VehicleLink`) and keeps trying until an
-autopilot is heard, since PX4 may boot after us. While it waits it asks systemd for more
-start-up time (EXTEND_TIMEOUT_USEC). Once connected it sends READY=1. Then a loop paced by a
-`RateKeeper` runs at `tick_rate_hz`. Each tick builds a one-line status from the telemetry
-snapshot (link state, flight mode, armed, landed state, NED position, battery, health) and
-sends it to systemd as STATUS. The line is logged every `status_period_s`, and at once when
-the link state, mode, armed, landed state or readiness changes. The link logs its own
-`LinkEvent`s when they happen (logger `companion.vehicle_link`), so they reach the journal in
-order with these lines. Health is waited for without blocking the loop: the line shows the
-failed checks, and a warning says when the vehicle is still not ready to fly after
-`link.health_timeout_s`. WATCHDOG=1 is sent only on a tick that starts on time (lateness up to
-`watchdog_max_lag_s`). It is never sent from a timer of its own, so a stalled or starved loop
-is restarted by systemd (WatchdogSec). A link that gave up (`LinkState.FAILED`) ends the
-process with status 1 (Restart=on-failure). SIGTERM/SIGINT send STOPPING=1, close the link and
-exit 0.
+It runs the whole flight process (`companion.flight.process.FlightProcess`: camera ingest,
+wire CNN, DROAN, planner, tracker, the mission manager and, when `ground.broker_url` is set,
+the ground link). It loads the wire CNN first, then opens the MAVSDK link (`VehicleLink`) and
+keeps trying until an autopilot is heard, since PX4 may boot after us; while it waits it asks
+systemd for more start-up time (EXTEND_TIMEOUT_USEC). Once connected it sends READY=1 and
+starts the flight process. A supervision loop paced by a `RateKeeper` runs at `tick_rate_hz`.
+Each tick builds a one-line status from the telemetry snapshot (link state, flight mode,
+armed, landed state, NED position, battery, health, mission state) and sends it to systemd as
+STATUS. The line is logged every `status_period_s`, and at once when the link state, mode,
+armed, landed state, readiness or mission state changes; the stage timings are logged by the
+process itself. The link logs its own `LinkEvent`s when they happen (logger
+`companion.link.vehicle_link`), so they reach the journal in order with these lines. A
+warning says when the vehicle is still not ready to fly after `link.health_timeout_s`.
+WATCHDOG=1 is sent only on a tick that starts on time (lateness up to `watchdog_max_lag_s`)
+while the flight process' mission loop is ticking too; it is never sent from a timer of its
+own, so a stalled or starved process is restarted by systemd (WatchdogSec). A link that gave
+up (`LinkState.FAILED`) ends the process with status 1 (Restart=on-failure). SIGTERM/SIGINT
+send STOPPING=1, stop the flight process, close the link and exit 0.
 
-It NEVER commands the vehicle: no arm, takeoff, mode change or offboard. The mission manager
-that flies will come in a later issue and run inside this process.
+The vehicle is commanded only by the mission: from the ground station's commands, or on its
+own with `mission.auto_start` and configured goals; with neither it never arms.
 """
 
 from __future__ import annotations
@@ -30,11 +33,18 @@ import signal
 from collections.abc import Awaitable, Callable, Iterator
 from typing import TYPE_CHECKING
 
+from companion.clock import finished_first
+from companion.flight.process import FlightProcess
+from companion.flight.vehicle_check import check_vehicle
+from companion.ingest.frames import CameraSource
+from companion.ingest.sources import camera_source
+from companion.link.telemetry import Health, TelemetrySnapshot
+from companion.link.vehicle_link import LinkError, LinkState, VehicleLink
+from companion.mission import MissionState
 from companion.rate import RateKeeper
+from companion.record.writer import start_recording
 from companion.service_params import ServiceParams
 from companion.systemd_notify import SystemdNotifier, watchdog_interval_s
-from companion.telemetry import Health, TelemetrySnapshot
-from companion.vehicle_link import LinkError, LinkState, VehicleLink
 
 if TYPE_CHECKING:
     from companion.config import Settings
@@ -45,12 +55,15 @@ log = logging.getLogger(__name__)
 # ---------------------------------------------------------------------------- status (pure)
 
 
-def status_line(state: LinkState, snap: TelemetrySnapshot) -> str:
-    """One line describing the link and the vehicle; `?` marks what was never received.
+def status_line(
+    state: LinkState, snap: TelemetrySnapshot, mission: MissionState | None = None
+) -> str:
+    """One line describing the link, the vehicle and the mission; `?` marks what was never
+    received.
 
     Example: `link=connected mode=HOLD armed=no landed=ON_GROUND ned_m=0.00,0.00,-0.01
-    battery=12.40V/87% health=ready age_s=0.03`. Position NED from the autopilot's local
-    origin, m; `age_s` is the time since the last telemetry of any kind.
+    battery=12.40V/87% health=ready age_s=0.03 mission=idle`. Position NED from the
+    autopilot's local origin, m; `age_s` is the time since the last telemetry of any kind.
     """
     pose = snap.pose
     ned = "?" if pose is None else ",".join(f"{x:.2f}" for x in pose.position_ned_m)
@@ -65,6 +78,7 @@ def status_line(state: LinkState, snap: TelemetrySnapshot) -> str:
             f"battery={_battery_text(snap)}",
             f"health={_health_text(snap.health)}",
             f"age_s={'?' if math.isinf(age_s) else f'{age_s:.2f}'}",
+            *(() if mission is None else (f"mission={mission.value}",)),
         )
     )
 
@@ -141,27 +155,48 @@ async def run_service(
     notify: SystemdNotifier | None = None,
     stop: asyncio.Event | None = None,
     handle_signals: bool = True,
+    camera: CameraSource | None = None,
 ) -> int:
     """Run the service until `stop` is set or SIGTERM/SIGINT arrives; the exit status.
 
-    0 after a requested stop, 1 when the link gave up reconnecting. `notify` defaults to
-    `$NOTIFY_SOCKET` (a no-op outside systemd). Cancelling the task also closes the link and
-    sends STOPPING=1 before `CancelledError` propagates. Never commands the vehicle.
+    0 after a requested stop, 1 when the link gave up reconnecting or the flight process
+    failed. `notify` defaults to `$NOTIFY_SOCKET` (a no-op outside systemd); `camera`, to
+    `camera.source` of the settings. Cancelling the task also stops the flight process, closes
+    the link and sends STOPPING=1 before `CancelledError` propagates.
     """
     p = ServiceParams() if params is None else params
     notifier = SystemdNotifier.from_environment() if notify is None else notify
     stop_event = asyncio.Event() if stop is None else stop
     link = VehicleLink(settings.link)
     _warn_if_watchdog_too_tight(p)
+    notifier.extend_timeout(p.startup_grace_s * 6, "loading the wire CNN")
+    process = FlightProcess(settings, link, camera or camera_source(settings), link.clock)
+    recorder = None
+    flight: asyncio.Task | None = None
     with _stop_on_signals(stop_event, enabled=handle_signals):
         try:
             if not await _connect_with_retry(link, p, notifier, stop_event):
                 return 0
-            notifier.ready(status_line(link.state, link.telemetry()))
-            log.info("link up on %s; supervising", settings.link.connection_url)
-            return await _supervise(link, p, notifier, stop_event)
+            notifier.ready(status_line(link.state, link.telemetry(), process.mission.state))
+            log.info("link up on %s; flying", settings.link.connection_url)
+            process.adopt(await check_vehicle(process.settings, link))
+            # after the vehicle check: a recording carries the adopted limits (record.path,
+            # `run --record`; None: not recording)
+            recorder = start_recording(process)
+            flight = asyncio.create_task(process.run(stop_event), name="flight")
+            return await _supervise(link, process, p, notifier, stop_event, flight)
         finally:
-            notifier.stopping("stopping: closing the link")
+            notifier.stopping("stopping: the flight process and the link")
+            stop_event.set()
+            if flight is not None:
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(asyncio.shield(flight), p.stop_timeout_s)
+                if not flight.done():
+                    flight.cancel()
+                    with contextlib.suppress(asyncio.CancelledError, Exception):
+                        await flight
+            if recorder is not None:
+                recorder.close()
             await link.close()
             log.info("stopped")
             notifier.close()
@@ -190,18 +225,30 @@ async def _connect_with_retry(
 
 
 async def _supervise(
-    link: VehicleLink, p: ServiceParams, notifier: SystemdNotifier, stop: asyncio.Event
+    link: VehicleLink,
+    process: FlightProcess,
+    p: ServiceParams,
+    notifier: SystemdNotifier,
+    stop: asyncio.Event,
+    flight: asyncio.Task,
 ) -> int:
-    """The supervision loop; returns the exit status once `stop` is set or the link failed."""
+    """The supervision loop; returns the exit status once `stop` is set, the link failed or
+    the flight process ended with an error (status 1)."""
     pacer = _StoppablePacer(p.tick_rate_hz, link.now_s, stop)
     readiness = ReadinessWatch(link.params.health_timeout_s, link.now_s())
     last_key: tuple[object, ...] | None = None
     next_log_s = -math.inf
     lag_s = 0.0
+    mission_period_s = 1.0 / process.settings.flight.mission_rate_hz
     while not stop.is_set():
+        if flight.done() and not stop.is_set():
+            error = flight.exception()
+            log.error("the flight process ended: %r; exiting for systemd to restart us", error)
+            return 1
         snap = link.telemetry()
-        line = status_line(link.state, snap)
-        key = status_key(link.state, snap)
+        mission = process.mission.state
+        line = status_line(link.state, snap, mission)
+        key = (*status_key(link.state, snap), mission)
         if key != last_key or snap.stamp_s >= next_log_s:
             log.info("%s", line)
             last_key, next_log_s = key, snap.stamp_s + p.status_period_s
@@ -214,10 +261,12 @@ async def _supervise(
         if link.state is LinkState.FAILED:
             log.error("the link gave up reconnecting; exiting for systemd to restart us")
             return 1
-        if lag_s <= p.watchdog_max_lag_s:
+        mission_lag_s = link.now_s() - process.mission_tick_s - mission_period_s
+        if lag_s <= p.watchdog_max_lag_s and mission_lag_s <= p.watchdog_max_lag_s:
             notifier.watchdog(line)
         else:
-            log.warning("supervision tick %.2f s late: systemd watchdog not fed", lag_s)
+            late = max(lag_s, mission_lag_s)
+            log.warning("a loop ran %.2f s late: systemd watchdog not fed", late)
             notifier.status(line)
         lag_s = await pacer.next_tick()
     return 0
@@ -254,20 +303,7 @@ async def _unless_stopped(start: Callable[[], Awaitable[object]], stop: asyncio.
     """
     if stop.is_set():
         return False
-    work = asyncio.ensure_future(start())
-    stopped = asyncio.ensure_future(stop.wait())
-    try:
-        await asyncio.wait((work, stopped), return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        for task in (work, stopped):
-            if not task.done():
-                task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await task
-    if work.cancelled():
-        return False
-    work.result()
-    return True
+    return await finished_first(start(), stop.wait())
 
 
 @contextlib.contextmanager

@@ -42,6 +42,13 @@ class ServiceParams(BaseModel):
         description="pause between attempts to find the autopilot at start-up "
         "(each attempt waits link.connect_timeout_s), s",
     )
+    stop_timeout_s: float = Field(
+        5.0,
+        gt=0.0,
+        le=120.0,
+        description="on SIGTERM, time for the flight process to finish its current work "
+        "before it is cancelled, s",
+    )
     startup_grace_s: float = Field(
         10.0,
         gt=0.0,

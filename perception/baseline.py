@@ -1,4 +1,12 @@
-"""The per-frame Candamo et al. (2009) baseline of thesis 2.4.3, as a wire score map.
+"""Classical wire baselines as score maps: the per-frame Candamo et al. (2009) baseline of
+thesis 2.4.3, and an LSD line-segment baseline (issue 20), the floor a CNN must beat.
+
+LSD baseline (``lsd_scores``): OpenCV's LSD line-segment detector (von Gioi et al. 2010) on the
+grey image; each segment is drawn `lsd_baseline_width_px` wide (0: the width LSD estimates for
+its line-support region) and scores min(1, length / `lsd_baseline_full_length_px`), so long
+straight segments, which is what wires are, rank first; where segments overlap the longest wins.
+
+Candamo baseline:
 
 Edges (Canny, with the same thresholds as RGBLE's E map; the thesis used Lu et al.'s
 CannyPF), morphological filtering that drops 8-connected edge components of fewer than 30
@@ -69,6 +77,32 @@ def rasterised_lines(
         for a, b in zip(p1, p2, strict=True):
             cv2.line(canvas, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), 1, t)
         scores[canvas > 0] = level
+    return scores
+
+
+def lsd_scores(image_rgb: np.ndarray, params: PerceptionParams | None = None) -> np.ndarray:
+    """(H, W) float32 wire scores in [0, 1] of the LSD line-segment baseline (module doc).
+
+    image_rgb: RGB (H, W, 3) or grey (H, W) uint8.
+    """
+    params = params or PerceptionParams()
+    image = np.ascontiguousarray(image_rgb)
+    grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    lines, widths, _, _ = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD).detect(grey)
+    scores = np.zeros(grey.shape, np.float32)
+    if lines is None:
+        return scores
+    ends = lines.reshape(-1, 4).astype(np.float64)
+    length = np.hypot(ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1])
+    fixed = params.lsd_baseline_width_px
+    thickness = (
+        np.full(len(ends), fixed) if fixed else np.maximum(1, np.round(widths.reshape(-1)))
+    ).astype(int)
+    score = np.minimum(1.0, length / params.lsd_baseline_full_length_px)
+    pts = np.round(ends * 16).astype(np.int64)
+    for i in np.argsort(length, kind="stable"):  # longest last: overlaps keep the best score
+        x0, y0, x1, y1 = (int(v) for v in pts[i])
+        cv2.line(scores, (x0, y0), (x1, y1), float(score[i]), int(thickness[i]), cv2.LINE_8, 4)
     return scores
 
 

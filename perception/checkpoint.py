@@ -4,7 +4,9 @@ A checkpoint is a ``torch.save`` dict of plain types (loadable with ``weights_on
 ``format``, ``arch``, ``input_mode``, ``in_channels``, ``normalisation`` (see
 ``perception.inputs.NORMALISATION``), ``state_dict``, ``training`` (command, steps, seed,
 losses, ...), ``metrics`` (held-out evaluation) and, for resumable training checkpoints only,
-``optimizer_state``. The shipped default lives in ``perception/weights/`` with its metrics in a
+``optimizer_state``, and optionally ``mask_threshold`` (the mask threshold chosen on real
+photographs, `wireavoid calibrate-threshold`, which `WireSegmenter.mask` then uses). The
+shipped default lives in ``perception/weights/`` with its metrics in a
 JSON file of the same stem beside it.
 """
 
@@ -87,14 +89,22 @@ def warm_start(model: nn.Module, path: str | os.PathLike, input_mode: str) -> nn
     """Load a checkpoint's weights into `model` tensor by tensor, in layer order.
 
     The architectures may differ in their parameter-free layers (a `p2` pool moves the
-    Sequential's indices), and `model` may add a skip (`-s`, `perception.zoo`) that the
+    Sequential's indices), an RGB checkpoint may start an RGBLE model (its first layer gets
+    zero weights on the L and E channels, so it starts as exactly the RGB model), and `model`
+    may add a skip (`-s`, `perception.zoo`) that the
     checkpoint lacks, which then keeps its zero initialisation; every other weight and bias must
     match in shape; ValueError otherwise.
     """
     payload = read_checkpoint(path)
+    source = dict(payload["state_dict"])
     if payload["input_mode"] != input_mode:
-        raise ValueError(f"{path} takes {payload['input_mode']} input, not {input_mode}")
-    target, source = model.state_dict(), payload["state_dict"]
+        if (payload["input_mode"], input_mode) != ("rgb", "rgble"):
+            raise ValueError(f"{path} takes {payload['input_mode']} input, not {input_mode}")
+        first = next(iter(source))  # RGB -> RGBLE: the L and E channels start at zero weight
+        extra = input_channels(input_mode) - input_channels("rgb")
+        w = source[first]
+        source[first] = torch.cat([w, w.new_zeros(w.shape[0], extra, *w.shape[2:])], dim=1)
+    target = model.state_dict()
     if not any(k.startswith("skip.") for k in source):
         target = {k: v for k, v in target.items() if not k.startswith("skip.")}
     shapes = [tuple(v.shape) for v in target.values()], [tuple(v.shape) for v in source.values()]
@@ -124,8 +134,31 @@ def load_checkpoint(path: str | os.PathLike | None = None) -> tuple[nn.Module, d
     model.load_state_dict(payload["state_dict"])
     model.eval()
     meta = {k: v for k, v in payload.items() if k not in ("state_dict", "optimizer_state")}
+    meta.setdefault("mask_threshold", None)
     meta["path"] = str(path)
     return model, meta
+
+
+def record_mask_threshold(
+    path: str | os.PathLike, threshold: float, record: dict[str, Any]
+) -> Path:
+    """Store a mask threshold (and `record`, how it was chosen) in a checkpoint, atomically,
+    and under "mask_threshold" in the JSON beside it when that exists."""
+    if not 0.0 < threshold < 1.0:
+        raise ValueError(f"a mask threshold lies in (0, 1), got {threshold}")
+    path = Path(path)
+    payload = read_checkpoint(path)
+    payload["mask_threshold"] = float(threshold)
+    payload["mask_threshold_record"] = dict(record)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(path)
+    meta = metrics_path(path)
+    if meta.is_file():
+        doc = json.loads(meta.read_text())
+        doc["mask_threshold"] = {"value": float(threshold), **record}
+        write_metrics_json(path, doc)
+    return path
 
 
 def write_metrics_json(checkpoint_path: str | os.PathLike, record: dict[str, Any]) -> Path:
@@ -158,4 +191,8 @@ def ship_checkpoint(
         **(extra or {}),
     }
     write_metrics_json(path, record)
+    if payload.get("mask_threshold") is not None:
+        record_mask_threshold(
+            path, payload["mask_threshold"], payload.get("mask_threshold_record", {})
+        )
     return path

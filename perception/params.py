@@ -14,12 +14,19 @@ class PerceptionParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     model: str = Field(
-        DEFAULT_MODEL,
+        FAST_MODEL,
         description="zoo architecture whose shipped weights the segmenter loads (2.3.1): "
-        f"{DEFAULT_MODEL}, or {FAST_MODEL} for 480x640 frames at >= 10 Hz on a CPU",
+        f"{FAST_MODEL}, pooled, the flight loop's (half the latency at 240x320, better on real "
+        f"photos), or {DEFAULT_MODEL}, the thesis' unpooled grid model",
     )
     confidence_threshold: float = Field(
         0.95, gt=0, lt=1, description="wire-probability threshold of the mask (4.4.1)"
+    )
+    mask_threshold_from_weights: bool = Field(
+        True,
+        description="threshold masks at the value recorded with the weights (chosen on real "
+        "photographs, `wireavoid calibrate-threshold`) instead of confidence_threshold; "
+        "weights without one use confidence_threshold",
     )
     canny_low_threshold: float = Field(
         50.0, ge=0, le=1000, description="Canny hysteresis low threshold of RGBLE's E map (2.3.4)"
@@ -64,6 +71,20 @@ class PerceptionParams(BaseModel):
     )
     baseline_max_lines_per_window: int = Field(
         6, ge=1, le=100, description="Candamo baseline: strongest Hough lines kept per subwindow"
+    )
+    lsd_baseline_width_px: int = Field(
+        2,
+        ge=0,
+        le=15,
+        description="LSD baseline: width segments are drawn with, px; 0 = each segment's own "
+        "LSD width estimate (scores 0.49 ODS-F on ttpla-sample against 0.54 at 2 px)",
+    )
+    lsd_baseline_full_length_px: float = Field(
+        200.0,
+        gt=0,
+        le=100_000,
+        description="LSD baseline: segment length that scores 1, px; shorter ones score "
+        "length / this",
     )
     baseline_max_thickness_px: int = Field(
         5,
@@ -127,6 +148,56 @@ class SyntheticParams(BaseModel):
     supersampling: int = Field(4, ge=1, le=8, description="anti-aliasing supersampling factor")
     photo_probability: float = Field(
         0.3, ge=0, le=1, description="share of backgrounds that are real photographs, when any"
+    )
+    aerial_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of views pitched down at cluttered ground (roads, roofs, fields, "
+        "canopy, water, snow), where drones fly; 0 keeps the thesis' forward views (2.3.2)",
+    )
+    aerial_pitch_min_deg: float = Field(
+        25.0, ge=5, le=90, description="shallowest downward pitch of an aerial view, deg"
+    )
+    aerial_altitude_min_m: float = Field(
+        6.0, gt=0, description="lowest camera height above ground of an aerial view, m"
+    )
+    aerial_altitude_max_m: float = Field(
+        80.0, gt=0, description="highest camera height above ground of an aerial view, m"
+    )
+    aerial_width_floor_max_px: float = Field(
+        4.0,
+        gt=0,
+        le=12,
+        description="highest floor of the rendered wire width in aerial views, px (conductors "
+        "seen from above are 1-10 px wide after blur and halo)",
+    )
+    wire_shadow_probability: float = Field(
+        0.6,
+        ge=0,
+        le=1,
+        description="share of aerial views in which wires and poles cast shadows on the ground "
+        "(thin dark lines, never labelled)",
+    )
+    fittings_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of bundles with insulator strings at the supports and spacers "
+        "between close conductors (drawn, never labelled)",
+    )
+    tower_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of supported bundles hung from lattice towers instead of poles",
+    )
+    sensor_effects_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of images with vignetting, over-exposure and resampling blur, "
+        "on top of the lighting, blur, noise and JPEG every image gets",
     )
 
 

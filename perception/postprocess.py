@@ -25,13 +25,14 @@ def remove_small_components(binary: np.ndarray, min_px: int) -> np.ndarray:
     return keep[labels]
 
 
-def wire_mask(prob: np.ndarray, params: PerceptionParams | None = None) -> np.ndarray:
+def wire_mask(
+    prob: np.ndarray, params: PerceptionParams | None = None, threshold: float | None = None
+) -> np.ndarray:
     """(H, W) bool wire-obstacle mask of an (H, W) wire probability map in [0, 1] (4.4.1).
 
-    Pixels with confidence < `params.confidence_threshold` (0.95 in the thesis) are removed,
-    then 8-connected speckles smaller than `params.min_wire_component_px` pixels.
+    Pixels with confidence < `threshold` (None: `params.confidence_threshold`, 0.95 in the
+    thesis) are removed, then 8-connected speckles smaller than `params.min_wire_component_px`.
     """
     params = params or PerceptionParams()
-    return remove_small_components(
-        np.asarray(prob) >= params.confidence_threshold, params.min_wire_component_px
-    )
+    cut = params.confidence_threshold if threshold is None else threshold
+    return remove_small_components(np.asarray(prob) >= cut, params.min_wire_component_px)

@@ -280,7 +280,7 @@ def calibration_batches(
     """(1, C, H, W) float32 network inputs of seeded synthetic wire images (2.3.2), for int8
     calibration: the activation ranges of scenes with wires, not of random noise."""
     from perception.inputs import network_input
-    from perception.synthetic import synthetic_sample
+    from perception.training.synthetic import synthetic_sample
 
     images = [synthetic_sample(seed, i, height_px, width_px)[0] for i in range(count)]
     return [network_input(image, input_mode)[None] for image in images]  # type: ignore[arg-type]

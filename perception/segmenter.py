@@ -58,6 +58,8 @@ class WireSegmenter:
     input_mode: str
     stride_px: int
     params: PerceptionParams
+    recorded_threshold: float | None = None
+    """Mask threshold recorded with the weights (chosen on real photographs), if any."""
 
     @classmethod
     def load(
@@ -88,7 +90,9 @@ class WireSegmenter:
                 f"{meta['path']} was trained with normalisation {stored}, "
                 f"but perception.inputs applies {expected}"
             )
-        return cls.from_model(model, mode, runtime, params, cache_dir, arch=meta["arch"])
+        segmenter = cls.from_model(model, mode, runtime, params, cache_dir, arch=meta["arch"])
+        segmenter.recorded_threshold = meta.get("mask_threshold")
+        return segmenter
 
     @classmethod
     def from_model(
@@ -143,6 +147,19 @@ class WireSegmenter:
         """
         return self.probabilities([image], channel_order)[0]
 
+    @property
+    def mask_threshold(self) -> float:
+        """The probability a mask pixel needs (4.4.1): the threshold recorded with the weights
+        when there is one and `params.mask_threshold_from_weights`, else
+        `params.confidence_threshold` (0.95)."""
+        if self.params.mask_threshold_from_weights and self.recorded_threshold is not None:
+            return float(self.recorded_threshold)
+        return self.params.confidence_threshold
+
+    def mask_of(self, prob: np.ndarray) -> np.ndarray:
+        """(H, W) bool wire-obstacle mask of this model's (H, W) probability map (4.4.1)."""
+        return wire_mask(prob, self.params, self.mask_threshold)
+
     def mask(self, image: np.ndarray, channel_order: str = "bgr") -> np.ndarray:
         """(H, W) bool wire-obstacle mask: thresholded and speckle-filtered probability (4.4.1)."""
-        return wire_mask(self.probability(image, channel_order), self.params)
+        return self.mask_of(self.probability(image, channel_order))

@@ -21,6 +21,13 @@ class YawPolicy(StrEnum):
     FIXED = "fixed"  # hold `fixed_yaw_rad`
 
 
+class SetpointMode(StrEnum):
+    """What the tracker sends the autopilot while it follows a plan."""
+
+    TRAJECTORY = "trajectory"  # reference position + velocity feed-forward
+    VELOCITY = "velocity"  # velocity with the tracker's own position correction
+
+
 class CheckMode(StrEnum):
     """How trajectories are batched into occupancy queries (eq. 4.5 per waypoint)."""
 
@@ -87,8 +94,9 @@ class PlanningParams(BaseModel):
         ge=0,
         le=10,
         description=(
-            "cost per m of net descent, so wires are passed over rather than under "
-            "(sag; thesis 4.7.2 run 10 failed going under), 1/m"
+            "cost per m of net descent below the start and the goal, so wires are passed "
+            "over rather than under (sag; thesis 4.7.2 run 10 failed going under) while a "
+            "goal below is descended to, 1/m"
         ),
     )
     switch_cost: float = Field(
@@ -111,6 +119,13 @@ class PlanningParams(BaseModel):
         ge=0,
         le=10,
         description="free path required beyond the pruned end plus braking distance, m",
+    )
+    own_volume_m: float = Field(
+        0.5,
+        ge=0,
+        le=5,
+        description="the first this much of every trajectory lies inside the vehicle itself: "
+        "unseen there is not unknown (no camera sees that close); keep it at the robot radius, m",
     )
     min_altitude_m: float = Field(
         1.0, ge=0, le=100, description="flight floor above home (NED z = 0); lower is collision, m"
@@ -163,10 +178,41 @@ class PlanningParams(BaseModel):
     arrival_tolerance_m: float = Field(
         0.5, gt=0, le=20, description="distance to the goal that counts as arrived, m"
     )
+    approach_distance_m: float = Field(
+        3.0,
+        ge=0,
+        le=50,
+        description="within this of the goal, a free and seen straight segment to it is flown "
+        "instead of the library (beyond 4.5: the library cannot settle on a goal), m",
+    )
+    approach_speed_mps: float = Field(
+        1.0, gt=0, le=10, description="speed of the final straight approach to the goal, m/s"
+    )
     unreachable_confirm_cycles: int = Field(
         5, ge=1, le=100, description="cycles the goal must be seen in collision, count"
     )
+    unreachable_range_m: float = Field(
+        6.0,
+        gt=0,
+        le=1000,
+        description="the goal counts as seen in collision only from this close: from farther it "
+        "may lie in a wire's 4-20 m depth prior (4.4.3) that nearer views clear, m",
+    )
+    stop_path_max_gap_m: float = Field(
+        1.0,
+        ge=0,
+        le=10,
+        description="a brake follows the path last checked free (its braking distance "
+        "included) when the vehicle is within this of it, else the library's stop trajectory "
+        "from where the vehicle is, m",
+    )
     # --- path tracking ---
+    setpoint_mode: SetpointMode = Field(
+        SetpointMode.TRAJECTORY,
+        description="how the tracker flies a plan: 'trajectory' sends the reference position "
+        "with its velocity as feed-forward (the autopilot's position loop corrects its lag), "
+        "'velocity' sends velocities with the tracker's own position correction",
+    )
     position_gain_per_s: float = Field(
         1.0, ge=0, le=10, description="velocity correction per m of position error, 1/s"
     )

@@ -15,21 +15,29 @@ tracker commanded last and the occupancy map; it returns a `PlannerOutput` whose
   closer than the tightest library turn could reach (no orbiting the goal): brake, then
   rotate towards it before choosing a trajectory.
 - ARRIVED / UNREACHABLE: hold. Unreachable: the goal seen in collision for
-  `unreachable_confirm_cycles` cycles, or stuck again after `max_rewinds` rewinds.
+  `unreachable_confirm_cycles` cycles from within `unreachable_range_m`, or stuck again after
+  `max_rewinds` rewinds.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from geometry.rotation import wrap_angle_rad
 from mapping.query import OccupancyMap
 from planning.library import TrajectoryLibrary
 from planning.params import PlanningParams
-from planning.selection import select_trajectory
-from planning.tracker import wrap_angle_rad
+from planning.selection import braking_distance_m, select_trajectory
+from planning.tracker import sample_reference
 from planning.types import PlannerOutput, PlannerState, Reference, VehicleState
 
 _REWIND_GRACE_S = 3.0  # extra time a rewind may take past its reference's end
+_APPROACH_STEP_M = 0.2  # spacing of the points checked along a final approach
+_APPROACH_DT_S = 0.1  # time step of the final approach's reference
+_APPROACH_MAX_SAMPLES = 600
+_CREEP_MPS = 0.05  # the approach never stalls short of the goal
 
 
 class LocalPlanner:
@@ -49,8 +57,11 @@ class LocalPlanner:
         self._goal: np.ndarray | None = None
         self._state = PlannerState.IDLE
         self._reference: Reference | None = None
+        self._escape: Reference | None = None  # the path checked free the vehicle is flying
+        self._anchor: np.ndarray | None = None  # where the vehicle's own volume is, recovering
         self._plan_id = 0
         self._previous_index: int | None = None
+        self._approach_id = -1  # plan id of the final approach's reference
         self._crumbs: list[np.ndarray] = []
         self._best_distance_m = np.inf
         self._last_progress_s = 0.0
@@ -78,7 +89,7 @@ class LocalPlanner:
         """Fly to `goal_ned_m` (3,), local NED, m; None: stop and hold."""
         self._goal = None if goal_ned_m is None else np.asarray(goal_ned_m, float).copy()
         self._state = PlannerState.IDLE
-        self._reference = None
+        self._reference = self._escape = self._anchor = None
         self._previous_index = None
         self._best_distance_m = np.inf
         self._last_progress_s = now_s
@@ -106,7 +117,11 @@ class LocalPlanner:
             return self._hold(now_s, vehicle, PlannerState.ARRIVED, self._goal, distance)
 
         goal_answer = occupancy_map.query(self._goal[None, :])
-        goal_blocked = bool(goal_answer.collision[0]) and bool(goal_answer.seen[0])
+        goal_blocked = (
+            bool(goal_answer.collision[0])
+            and bool(goal_answer.seen[0])
+            and distance <= p.unreachable_range_m
+        )
         self._goal_hits = self._goal_hits + 1 if goal_blocked else 0
         if self._goal_hits >= p.unreachable_confirm_cycles:
             return self._hold(now_s, vehicle, PlannerState.UNREACHABLE, position, distance, 1)
@@ -129,16 +144,20 @@ class LocalPlanner:
         elif now_s - self._last_progress_s > p.stuck_timeout_s:
             return self._rewind_or_give_up(now_s, vehicle, position, distance)
 
-        speed = float(np.hypot(*commanded_velocity_ned_mps[:2]))
-        stopped = speed < p.hover_speed_mps
-        if stopped or self._state is PlannerState.RECOVERING:
-            heading = vehicle.yaw_rad
-        else:
-            heading = float(
-                np.arctan2(commanded_velocity_ned_mps[1], commanded_velocity_ned_mps[0])
-            )
-        bin_index = self._library.bin_for_speed(speed)
-        positions, velocities = self._library.to_world(bin_index, position, heading)
+        if (
+            self._anchor is not None
+            and np.linalg.norm(position - self._anchor) > 2 * p.own_volume_m
+        ):
+            self._anchor = None  # flown away on seen ground: the volume moves with it again
+        own_center = position if self._anchor is None else self._anchor
+        if distance <= p.approach_distance_m and self._approach_is_free(
+            position, own_center, occupancy_map
+        ):
+            return self._approach(now_s, vehicle, position, distance, commanded_velocity_ned_mps)
+
+        speed, stopped, heading, positions, velocities = self._placed_library(
+            vehicle, commanded_velocity_ned_mps
+        )
         bearing = float(np.arctan2(*(self._goal - position)[[1, 0]]))
         off_nose = abs(float(wrap_angle_rad(bearing - heading))) > p.align_heading_rad
         # the goal lies inside the circle of the tightest turn the library flies from here
@@ -174,6 +193,7 @@ class LocalPlanner:
             self._library.stop_index,
             self._min_track_index,
             self._previous_index,
+            own_center,
         )
         counts = (selection.checked, selection.queries + 1, selection.points + 1)
         index = selection.index
@@ -188,6 +208,9 @@ class LocalPlanner:
                 positions[index, : end + 1],
                 velocities[index, : end + 1],
             )
+            self._escape = self._checked_path(
+                self._reference, positions[index], velocities[index], end
+            )
             cost = float(selection.cost[index])
             return self._output(now_s, self._library.labels[index], cost, distance, *counts)
 
@@ -199,6 +222,8 @@ class LocalPlanner:
         if stopped:
             self._state = PlannerState.RECOVERING
             self._turned_rad = 0.0
+            if self._anchor is None:
+                self._anchor = position.copy()
             self._reference = self._static_reference(
                 vehicle.stamp_s, position, yaw_rate=p.recovery_yaw_rate_radps
             )
@@ -207,7 +232,107 @@ class LocalPlanner:
             now_s, vehicle, commanded_velocity_ned_mps, positions, velocities, distance, counts
         )
 
+    def stop(
+        self, now_s: float, vehicle: VehicleState, commanded_velocity_ned_mps: np.ndarray
+    ) -> PlannerOutput:
+        """Brake (4.5) along the path checked free that the vehicle flies (else the library's
+        stop trajectory) and hold where it ends.
+
+        For stale inputs and holds the mission orders: the goal is kept, holding is not
+        counted as being stuck, and the next `step` plans from where the vehicle stopped.
+        """
+        position = np.asarray(vehicle.position_ned_m, float)
+        self._last_progress_s = now_s
+        distance = np.nan if self._goal is None else float(np.linalg.norm(self._goal - position))
+        if self._state is PlannerState.BRAKING and self._reference is not None:
+            return self._output(now_s, "stop", np.nan, distance, 0, 0, 0)
+        _, _, _, positions, velocities = self._placed_library(vehicle, commanded_velocity_ned_mps)
+        return self._brake(
+            now_s, vehicle, commanded_velocity_ned_mps, positions, velocities, distance, (0, 0, 0)
+        )
+
     # --- helpers -------------------------------------------------------------------------
+
+    def _approach_is_free(
+        self, position: np.ndarray, own_center: np.ndarray, occupancy_map: OccupancyMap
+    ) -> bool:
+        """The straight segment to the goal is free, and seen beyond the vehicle's own volume
+        around `own_center` (beyond the thesis: the library flies forward and cannot settle on
+        a nearby goal)."""
+        assert self._goal is not None
+        p = self._params
+        length = float(np.linalg.norm(self._goal - position))
+        arc = np.linspace(0.0, length, max(2, int(np.ceil(length / _APPROACH_STEP_M)) + 1))
+        points = position + (arc / max(length, 1e-9))[:, None] * (self._goal - position)
+        answer = occupancy_map.query(points)
+        own = (arc < p.own_volume_m) & (
+            np.linalg.norm(points - own_center, axis=1) < p.own_volume_m
+        )
+        unknown = ~np.asarray(answer.seen, bool) & ~own
+        return not (np.asarray(answer.collision, bool).any() or unknown.any())
+
+    def _approach_profile(
+        self, position: np.ndarray, commanded_velocity_ned_mps: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(times (P,), positions (P, 3), velocities (P, 3)) along the segment to the goal:
+        from the commanded speed along it, towards `approach_speed_mps` within
+        `max_accel_mps2`, slowing so that the tracker's stopping cap is never exceeded."""
+        assert self._goal is not None
+        p = self._params
+        length = float(np.linalg.norm(self._goal - position))
+        direction = (self._goal - position) / max(length, 1e-9)
+        speed = max(float(commanded_velocity_ned_mps @ direction), 0.0)
+        dt, a = _APPROACH_DT_S, p.max_accel_mps2
+        arcs, speeds = [0.0], [speed]
+        while arcs[-1] < length and len(arcs) < _APPROACH_MAX_SAMPLES:
+            target = min(p.approach_speed_mps, np.sqrt(a * (length - arcs[-1])))
+            speed = max(speed + float(np.clip(target - speed, -a * dt, a * dt)), _CREEP_MPS)
+            arcs.append(min(length, arcs[-1] + speed * dt))
+            speeds.append(speed)
+        speeds[-1] = 0.0
+        arc = np.array(arcs)
+        times = dt * np.arange(len(arc))
+        return times, position + arc[:, None] * direction, np.array(speeds)[:, None] * direction
+
+    def _approach(
+        self,
+        now_s: float,
+        vehicle: VehicleState,
+        position: np.ndarray,
+        distance: float,
+        commanded: np.ndarray,
+    ) -> PlannerOutput:
+        """Fly the free straight segment to the goal at `approach_speed_mps` and hold there."""
+        approaching = self._reference is not None and self._reference.plan_id == self._approach_id
+        if self._state is not PlannerState.TRACKING or not approaching:
+            times, positions, velocities = self._approach_profile(position, commanded)
+            self._plan_id += 1
+            self._reference = self._escape = Reference(
+                vehicle.stamp_s, times, positions, velocities, self._plan_id
+            )
+            self._approach_id = self._plan_id
+        self._state = PlannerState.TRACKING
+        self._previous_index = None
+        return self._output(now_s, "approach", np.nan, distance, 0, 1, 1)
+
+    def _placed_library(
+        self, vehicle: VehicleState, commanded_velocity_ned_mps: np.ndarray
+    ) -> tuple[float, bool, float, np.ndarray, np.ndarray]:
+        """(speed, stopped, heading, positions, velocities) of the library set for the
+        commanded speed, placed at the vehicle along its commanded heading (its nose when
+        stopped or recovering)."""
+        speed = float(np.hypot(*commanded_velocity_ned_mps[:2]))
+        stopped = speed < self._params.hover_speed_mps
+        if stopped or self._state is PlannerState.RECOVERING:
+            heading = vehicle.yaw_rad
+        else:
+            heading = float(
+                np.arctan2(commanded_velocity_ned_mps[1], commanded_velocity_ned_mps[0])
+            )
+        bin_index = self._library.bin_for_speed(speed)
+        position = np.asarray(vehicle.position_ned_m, float)
+        positions, velocities = self._library.to_world(bin_index, position, heading)
+        return speed, stopped, heading, positions, velocities
 
     def _brake(
         self,
@@ -219,11 +344,14 @@ class LocalPlanner:
         distance: float,
         counts: tuple[int, int, int],
     ) -> PlannerOutput:
-        """Follow the stop trajectory of the current bin (kept while already braking)."""
+        """Stop (kept while already braking): along the path checked free that the vehicle
+        is flying when it is on one, else the stop trajectory of the current bin."""
         if self._state is not PlannerState.BRAKING:
             self._state = PlannerState.BRAKING
             stop = self._library.stop_index
-            self._reference = self._trajectory_reference(
+            speed = float(np.linalg.norm(commanded_velocity_ned_mps))
+            along = self._stop_on_escape(now_s, vehicle, speed)
+            self._reference = along or self._trajectory_reference(
                 vehicle.stamp_s,
                 vehicle.position_ned_m,
                 commanded_velocity_ned_mps,
@@ -231,8 +359,64 @@ class LocalPlanner:
                 velocities[stop],
                 brake=True,
             )
+            self._escape = None
         self._previous_index = None
         return self._output(now_s, "stop", np.nan, distance, *counts)
+
+    def _checked_path(
+        self, reference: Reference, positions: np.ndarray, velocities: np.ndarray, end: int
+    ) -> Reference:
+        """`reference` continued along its library trajectory (`positions`, `velocities`:
+        (M, 3)) as far as selection checked it free: the braking distance at the speed of
+        the followed end `end` plus `safety_margin_m` beyond it (`checked_waypoints`)."""
+        arc = np.cumsum(
+            np.linalg.norm(
+                np.diff(positions, axis=0, prepend=reference.positions_ned_m[:1]), axis=1
+            )
+        )
+        speed_end = float(np.linalg.norm(velocities[end]))
+        needed = arc[end] + float(braking_distance_m(speed_end, self._params))
+        last = int(min(np.searchsorted(arc, needed + self._params.safety_margin_m), len(arc) - 1))
+        return replace(
+            reference,
+            times_s=np.concatenate([[0.0], self._library.times_s[: last + 1]]),
+            positions_ned_m=np.vstack([reference.positions_ned_m[:1], positions[: last + 1]]),
+            velocities_ned_mps=np.vstack(
+                [reference.velocities_ned_mps[:1], velocities[: last + 1]]
+            ),
+        )
+
+    def _stop_on_escape(
+        self, now_s: float, vehicle: VehicleState, speed_mps: float
+    ) -> Reference | None:
+        """A stop from `speed_mps` along the escape path from where it is at `now_s`, or None
+        when the vehicle is not on it (farther than `stop_path_max_gap_m`) or it has ended.
+
+        Constant deceleration at `max_accel_mps2`, s(t) = v0 t - a t^2 / 2, harder when the
+        path left is shorter than that stop: the vehicle stops on path that selection checked
+        free (its braking distance included), where the library's own stop trajectory, placed
+        along the commanded velocity, runs on unchecked ground.
+        """
+        escape, p = self._escape, self._params
+        if escape is None or now_s - escape.start_s > escape.times_s[-1]:
+            return None
+        start, _ = sample_reference(escape, now_s - escape.start_s)
+        if np.linalg.norm(start - vehicle.position_ned_m) > p.stop_path_max_gap_m:
+            return None
+        path = np.vstack([start, escape.positions_ned_m[escape.times_s > now_s - escape.start_s]])
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        if speed_mps < p.hover_speed_mps or arc[-1] < 1e-6:
+            return None
+        decel = max(p.max_accel_mps2, speed_mps**2 / (2.0 * arc[-1]))
+        duration = speed_mps / decel
+        dt = float(self._library.times_s[1] - self._library.times_s[0])
+        times = np.linspace(0.0, duration, max(2, int(np.ceil(duration / dt)) + 1))
+        along = speed_mps * times - 0.5 * decel * times**2
+        positions = np.column_stack([np.interp(along, arc, path[:, i]) for i in range(3)])
+        velocities = np.gradient(positions, times, axis=0)
+        velocities[-1] = 0.0
+        self._plan_id += 1
+        return Reference(vehicle.stamp_s, times, positions, velocities, self._plan_id, brake=True)
 
     def _record_crumb(self, position: np.ndarray) -> None:
         """Append the position to the flown path when it moved `breadcrumb_spacing_m`."""
@@ -268,7 +452,9 @@ class LocalPlanner:
         velocities = np.zeros_like(path)
         velocities[:-1] = np.diff(path, axis=0) / np.maximum(np.diff(times), 1e-9)[:, None]
         self._plan_id += 1
-        self._reference = Reference(vehicle.stamp_s, times, path, velocities, self._plan_id)
+        self._reference = self._escape = Reference(
+            vehicle.stamp_s, times, path, velocities, self._plan_id
+        )
         end = path[-1]
         cut = int(np.argmin([np.linalg.norm(c - end) for c in self._crumbs]))
         del self._crumbs[cut + 1 :]
@@ -317,6 +503,7 @@ class LocalPlanner:
     ) -> Reference:
         """Hold `position`, optionally rotating or turning to a yaw."""
         self._plan_id += 1
+        self._escape = None
         return Reference(
             start_s=stamp_s,
             times_s=np.zeros(1),

@@ -93,12 +93,17 @@ def checked_waypoints(
     origin_ned_m: np.ndarray,
     end_index: np.ndarray,
     params: PlanningParams,
+    own_center_ned_m: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Masks (K, M): waypoints to check, and the near ones that must be seen.
 
     Checked: up to the followed end `end_index` (K,) plus the braking distance at the speed
     there plus `safety_margin_m` (capped at the trajectory's end), so the vehicle can always
-    stop on known-free path. Near: within the braking distance at the start speed plus the margin.
+    stop on known-free path. Near: within the braking distance at the start speed plus the margin,
+    beyond the first `own_volume_m` of arc, which the vehicle itself occupies now (no camera sees
+    that close, and nothing else can be there). `own_center_ned_m` (default: the origin)
+    anchors that volume: only waypoints within `own_volume_m` of it are exempt, so a vehicle
+    that stopped and creeps on (recovery) cannot carry its exemption into unseen space.
     """
     origin = np.broadcast_to(np.asarray(origin_ned_m, float), positions_ned_m[:, :1].shape)
     steps = np.diff(positions_ned_m, axis=1, prepend=origin)
@@ -112,6 +117,9 @@ def checked_waypoints(
     checked[k, first_beyond] = True
     start_speed = np.linalg.norm(velocities_ned_mps[:, 0], axis=-1)
     near = arc <= (braking_distance_m(start_speed, params) + params.safety_margin_m)[:, None]
+    center = origin if own_center_ned_m is None else np.asarray(own_center_ned_m, float)
+    own = np.linalg.norm(positions_ned_m - center, axis=-1) < params.own_volume_m
+    near &= ~((arc < params.own_volume_m) & own)
     return checked, near
 
 
@@ -126,12 +134,14 @@ def select_trajectory(
     stop_index: int,
     min_track_index: int = 0,
     previous_index: int | None = None,
+    own_center_ned_m: np.ndarray | None = None,
 ) -> Selection:
     """The cheapest collision-free trajectory of one library bin placed in the world.
 
     positions_ned_m, velocities_ned_mps: (K, M, 3) from `TrajectoryLibrary.to_world`.
     origin_ned_m: (3,) where they start. goal_ned_m: (3,). heading_ned: (3,) library forward.
     min_track_index: waypoint reached after `min_track_s`; previous_index: last cycle's choice.
+    own_center_ned_m: where the vehicle's own volume is anchored (`checked_waypoints`).
     Trajectories are checked in ascending cost (eq. 4.8 + descent + switch terms; the switch
     term grows with the distance to last cycle's manoeuvre, against dithering), batched
     into one query (`check_mode` all) or cost-ordered chunks (chunked); with the unknown
@@ -143,7 +153,9 @@ def select_trajectory(
         waypoint_costs(positions_ned_m, velocities_ned_mps, goal_ned_m, heading_ned, params)
     )
     k = np.arange(n_traj)
-    descent_m = np.maximum(positions_ned_m[k, prune, 2] - origin_ned_m[2], 0.0)
+    # descent below both the start and the goal: a goal below is flown down to freely
+    floor_m = max(float(origin_ned_m[2]), float(np.asarray(goal_ned_m)[2]))
+    descent_m = np.maximum(positions_ned_m[k, prune, 2] - floor_m, 0.0)
     cost = cost + params.descent_cost_per_m * descent_m
     if previous_index is not None:
         gap = np.linalg.norm(positions_ned_m - positions_ned_m[previous_index], axis=-1)
@@ -153,7 +165,7 @@ def select_trajectory(
     reach = np.linalg.norm(positions_ned_m[:, min_track_index] - origin_ned_m, axis=-1)
     track = np.where(reach < goal_distance, np.maximum(prune, min_track_index), prune)
     checked, near = checked_waypoints(
-        positions_ned_m, velocities_ned_mps, origin_ned_m, track, params
+        positions_ned_m, velocities_ned_mps, origin_ned_m, track, params, own_center_ned_m
     )
     floor_z = max(-params.min_altitude_m, float(origin_ned_m[2]))
     below_floor = positions_ned_m[..., 2] > floor_z + 1e-6

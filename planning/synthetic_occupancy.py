@@ -14,24 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from geometry.shapes import Box, Wire
 from mapping.query import OccupancyQuery
-
-
-@dataclass(frozen=True, slots=True)
-class Box:
-    """Axis-aligned box between `min_ned_m` (3,) and `max_ned_m` (3,), NED, m."""
-
-    min_ned_m: np.ndarray
-    max_ned_m: np.ndarray
-
-
-@dataclass(frozen=True, slots=True)
-class Wire:
-    """Straight wire from `start_ned_m` (3,) to `end_ned_m` (3,) with `radius_m`, NED, m."""
-
-    start_ned_m: np.ndarray
-    end_ned_m: np.ndarray
-    radius_m: float = 0.01
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,10 +57,7 @@ class SyntheticOccupancyMap:
         for box in self.boxes:
             hit |= np.all((pts >= box.min_ned_m - r) & (pts <= box.max_ned_m + r), axis=1)
         for wire in self.wires:
-            axis = wire.end_ned_m - wire.start_ned_m
-            t = np.clip((pts - wire.start_ned_m) @ axis / float(axis @ axis), 0.0, 1.0)
-            gap = np.linalg.norm(pts - (wire.start_ned_m + t[:, None] * axis), axis=1)
-            hit |= gap <= wire.radius_m + r
+            hit |= wire.distance_m(pts) <= r
         return hit
 
     def seen(self, points_ned_m: np.ndarray) -> np.ndarray:
@@ -119,7 +100,7 @@ def wall(
 
 def wire_across(distance_m: float, altitude_m: float, half_span_m: float = 30.0) -> Wire:
     """A horizontal wire across the north axis at `distance_m`, `altitude_m` above home."""
-    return Wire(
+    return Wire.straight(
         np.array([distance_m, -half_span_m, -altitude_m]),
         np.array([distance_m, half_span_m, -altitude_m]),
     )

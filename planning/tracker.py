@@ -1,10 +1,14 @@
 """Path tracking: a planner `Reference` in, flight-link `Setpoint`s out, at >= 20 Hz.
 
-The velocity setpoint is the reference velocity `velocity_lead_s` ahead (feed-forward for
-the vehicle's velocity-loop lag) plus a bounded position-error correction.
+The velocity is the reference velocity `velocity_lead_s` ahead (feed-forward for the
+vehicle's velocity-loop lag). In `setpoint_mode` 'trajectory' (the default) it goes out with
+the reference position and acceleration as a TRAJECTORY setpoint (a stop manoeuvre: a BRAKE
+with a position): the autopilot's own position loop corrects its lag behind the plan and
+stops where the plan stops. In 'velocity' the tracker adds a bounded position-error
+correction itself.
 Across replans it cannot jump: when a new reference arrives (a new `plan_id`), the offset
-between the last commanded velocity and the new reference's fades out linearly over
-`blend_time_s`, and every change of the commanded velocity is limited to
+between the last commanded velocity (and trajectory position) and the new reference's fades
+out linearly over `blend_time_s`, and every change of the commanded velocity is limited to
 `setpoint_accel_slack * max_accel_mps2 * dt`. Near a reference's end the speed is capped so
 the vehicle can stop there; after its end the tracker holds its last point with a position
 setpoint. The yaw follows the yaw policy (or the reference's rotate / align command) at no
@@ -15,15 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from planning.params import PlanningParams, YawPolicy
+from geometry.rotation import wrap_angle_rad
+from planning.params import PlanningParams, SetpointMode, YawPolicy
 from planning.types import Reference, Setpoint, SetpointKind, VehicleState
 
 _MAX_DT_S = 0.2  # longest step the limiters integrate over (a late call is not a licence to jump)
-
-
-def wrap_angle_rad(angle_rad: float | np.ndarray) -> float | np.ndarray:
-    """Angle wrapped to [-pi, pi), rad."""
-    return (np.asarray(angle_rad) + np.pi) % (2.0 * np.pi) - np.pi
+_ACCEL_STEP_S = 0.05  # half the span of the reference's acceleration difference, s
 
 
 def sample_reference(reference: Reference, t_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -46,7 +47,9 @@ class PathTracker:
         self._last: Setpoint | None = None
         self._plan_id = -1
         self._blend_offset = np.zeros(3)
+        self._blend_position_offset = np.zeros(3)
         self._blend_start_s = 0.0
+        self._followed: Reference | None = None  # the reference last flown as a TRAJECTORY
 
     @property
     def last_setpoint(self) -> Setpoint | None:
@@ -70,6 +73,7 @@ class PathTracker:
         last_yaw = self._last.yaw_rad if self._last else vehicle.yaw_rad
         dt = float(np.clip(now_s - self._last.stamp_s, 0.0, _MAX_DT_S)) if self._last else 0.0
 
+        tracked = False  # the position goes out with the velocity (a trajectory or its brake)
         if reference is None:
             kind, position, valid = SetpointKind.BRAKE, None, False
             target_velocity = np.zeros(3)
@@ -81,25 +85,40 @@ class PathTracker:
             if t >= reference.times_s[-1]:
                 kind, position = SetpointKind.POSITION, reference.positions_ned_m[-1].copy()
                 target_velocity = np.zeros(3)
+            elif p.setpoint_mode is SetpointMode.TRAJECTORY:
+                kind = SetpointKind.BRAKE if reference.brake else SetpointKind.TRAJECTORY
+                position = ref_position
+                target_velocity = self._stoppable(vehicle, reference, ref_velocity)
             else:
                 kind = SetpointKind.BRAKE if reference.brake else SetpointKind.VELOCITY
                 position = None
                 target_velocity = self._tracking_velocity(
                     vehicle, reference, ref_position, ref_velocity
                 )
+            tracked = position is not None and kind is not SetpointKind.POSITION
             if reference.plan_id != self._plan_id:
                 self._plan_id = reference.plan_id
                 self._blend_offset = last_velocity - target_velocity
+                previous = self._blended_position(now_s)
+                self._blend_position_offset = (
+                    previous - position if tracked and previous is not None else np.zeros(3)
+                )
                 self._blend_start_s = now_s
         if kind is not SetpointKind.POSITION and p.blend_time_s > 0:
             fade = max(0.0, 1.0 - (now_s - self._blend_start_s) / p.blend_time_s)
             target_velocity = target_velocity + fade * self._blend_offset
+            if tracked:
+                position = position + fade * self._blend_position_offset
+        self._followed = reference if tracked else None
         step = target_velocity - last_velocity
         max_step = p.setpoint_accel_slack * p.max_accel_mps2 * dt
         norm = float(np.linalg.norm(step))
         velocity = last_velocity + (step * (max_step / norm) if norm > max_step else step)
         if kind is SetpointKind.POSITION:
             velocity = np.zeros(3)
+        acceleration = (
+            self._feed_forward_acceleration(reference, now_s) if tracked and reference else None
+        )
         yaw, yaw_rate = self._yaw(vehicle, reference, velocity, last_yaw, dt, goal_ned_m)
         self._last = Setpoint(
             stamp_s=now_s,
@@ -109,6 +128,7 @@ class PathTracker:
             yaw_rad=yaw,
             yaw_rate_radps=yaw_rate,
             valid=valid,
+            acceleration_ned_mps2=acceleration,
         )
         return self._last
 
@@ -125,11 +145,42 @@ class PathTracker:
         norm = float(np.linalg.norm(correction))
         if norm > p.max_correction_mps:
             correction *= p.max_correction_mps / norm
-        velocity = ref_velocity + correction
+        return self._stoppable(vehicle, reference, ref_velocity + correction)
+
+    def _stoppable(
+        self, vehicle: VehicleState, reference: Reference, velocity: np.ndarray
+    ) -> np.ndarray:
+        """`velocity` capped so the vehicle can stop at the reference's end (at half the
+        maximum deceleration)."""
         remaining = float(np.linalg.norm(reference.positions_ned_m[-1] - vehicle.position_ned_m))
-        cap = np.sqrt(p.max_accel_mps2 * remaining)  # stop at half the max deceleration
+        cap = np.sqrt(self._params.max_accel_mps2 * remaining)
         speed = float(np.linalg.norm(velocity))
         return velocity * (cap / speed) if speed > cap else velocity
+
+    def _feed_forward_acceleration(self, reference: Reference, now_s: float) -> np.ndarray:
+        """The reference's acceleration `velocity_lead_s` ahead (central difference over
+        `_ACCEL_STEP_S`), no larger than the tracker's own velocity rate limit."""
+        p = self._params
+        t = now_s - reference.start_s + p.velocity_lead_s
+        _, ahead = sample_reference(reference, t + _ACCEL_STEP_S)
+        _, behind = sample_reference(reference, t - _ACCEL_STEP_S)
+        acceleration = (ahead - behind) / (2.0 * _ACCEL_STEP_S)
+        limit = p.setpoint_accel_slack * p.max_accel_mps2
+        norm = float(np.linalg.norm(acceleration))
+        return acceleration * (limit / norm) if norm > limit else acceleration
+
+    def _blended_position(self, now_s: float) -> np.ndarray | None:
+        """Where the position sent would be at `now_s` on the reference followed so far (its
+        blend included): a new plan blends in from there, so the position is continuous at
+        the switch and a plan that starts on the old one (the planner's replan origin)
+        blends nothing. None when the last setpoint was no TRAJECTORY."""
+        followed = self._followed
+        if followed is None:
+            return None
+        position, _ = sample_reference(followed, now_s - followed.start_s)
+        blend_time = self._params.blend_time_s
+        fade = max(0.0, 1.0 - (now_s - self._blend_start_s) / blend_time) if blend_time else 0.0
+        return position + fade * self._blend_position_offset
 
     def _yaw(
         self,

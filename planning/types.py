@@ -1,8 +1,11 @@
-"""Messages in and out of the planner and the path tracker. Frames: local NED, m, rad."""
+"""Messages in and out of the planner and the path tracker: the one home of `VehicleState` and
+`Setpoint`, which travel unchanged from the planner to the flight link. Frames: local NED, m, rad.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
@@ -26,7 +29,8 @@ class SetpointKind(StrEnum):
 
     VELOCITY = "velocity"  # velocity_ned_mps + yaw
     POSITION = "position"  # position_ned_m + yaw (hold, arrival, rotate in place)
-    BRAKE = "brake"  # velocity_ned_mps decelerating to zero + yaw
+    BRAKE = "brake"  # velocity_ned_mps decelerating to zero + yaw (+ position: the stop curve)
+    TRAJECTORY = "trajectory"  # position_ned_m to track, velocity_ned_mps its feed-forward + yaw
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,12 +76,22 @@ class Reference:
 
 @dataclass(frozen=True, slots=True)
 class Setpoint:
-    """One setpoint for the flight link, sampled at `stamp_s`.
+    """One setpoint for the flight link, produced at `stamp_s` (the process clock, s).
 
+    The one setpoint type from the tracker to MAVLink: the link streams it as it is.
+    kind: VELOCITY and BRAKE fly `velocity_ned_mps`; POSITION flies `position_ned_m`;
+        TRAJECTORY (and a BRAKE with a position, along a planned stop) fly `position_ned_m`
+        with `velocity_ned_mps` as its feed-forward (the autopilot's position loop then
+        corrects its own lag, PX4's trajectory_setpoint).
+    acceleration_ned_mps2: (3,) NED, m/s^2, the acceleration feed-forward of a setpoint with
+        a position (the turn's centripetal part the velocity loop would otherwise lag), or None.
     velocity_ned_mps: (3,) NED, m/s (zero for a position hold).
     position_ned_m: (3,) NED, m, or None when the link must fly the velocity.
-    yaw_rad: nose heading from north, rad. yaw_rate_radps: its feed-forward rate, rad/s.
-    valid: False when the setpoint was built without a plan; the link must brake and hold.
+    yaw_rad: nose heading from north, rad; NaN keeps the current heading (the link fills in
+        the measured yaw). yaw_rate_radps: its feed-forward rate, rad/s.
+    valid: False when the setpoint was built without a plan (or from stale inputs): the
+        link brakes and then holds instead of flying it.
+    Vectors are finite, read-only copies.
     """
 
     stamp_s: float
@@ -85,8 +99,75 @@ class Setpoint:
     velocity_ned_mps: np.ndarray
     position_ned_m: np.ndarray | None
     yaw_rad: float
-    yaw_rate_radps: float
+    yaw_rate_radps: float = 0.0
     valid: bool = True
+    acceleration_ned_mps2: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "velocity_ned_mps", _finite_vec3(self.velocity_ned_mps))
+        if self.acceleration_ned_mps2 is not None:
+            if self.position_ned_m is None:
+                raise ValueError("an acceleration feed-forward needs position_ned_m")
+            object.__setattr__(
+                self, "acceleration_ned_mps2", _finite_vec3(self.acceleration_ned_mps2)
+            )
+        if self.position_ned_m is not None:
+            object.__setattr__(self, "position_ned_m", _finite_vec3(self.position_ned_m))
+        elif self.kind in (SetpointKind.POSITION, SetpointKind.TRAJECTORY):
+            raise ValueError(f"a {self.kind.value.upper()} setpoint needs position_ned_m")
+
+    @classmethod
+    def velocity(cls, velocity_ned_mps: np.ndarray, yaw_rad: float, stamp_s: float) -> Setpoint:
+        """A velocity + yaw setpoint."""
+        return cls(stamp_s, SetpointKind.VELOCITY, velocity_ned_mps, None, float(yaw_rad))
+
+    @classmethod
+    def position(cls, position_ned_m: np.ndarray, yaw_rad: float, stamp_s: float) -> Setpoint:
+        """A position + yaw setpoint (hold there)."""
+        return cls(stamp_s, SetpointKind.POSITION, np.zeros(3), position_ned_m, float(yaw_rad))
+
+    @classmethod
+    def trajectory(
+        cls,
+        position_ned_m: np.ndarray,
+        velocity_ned_mps: np.ndarray,
+        yaw_rad: float,
+        stamp_s: float,
+        acceleration_ned_mps2: np.ndarray | None = None,
+    ) -> Setpoint:
+        """A point of a trajectory: its position with its velocity (and acceleration) as
+        feed-forward, + yaw."""
+        return cls(
+            stamp_s,
+            SetpointKind.TRAJECTORY,
+            velocity_ned_mps,
+            position_ned_m,
+            float(yaw_rad),
+            acceleration_ned_mps2=acceleration_ned_mps2,
+        )
+
+    @classmethod
+    def brake(cls, yaw_rad: float, stamp_s: float, valid: bool = True) -> Setpoint:
+        """Zero velocity, holding `yaw_rad`."""
+        return cls(stamp_s, SetpointKind.BRAKE, np.zeros(3), None, float(yaw_rad), valid=valid)
+
+    def with_yaw(self, yaw_rad: float) -> Setpoint:
+        """This setpoint with its yaw replaced when it is NaN."""
+        if not math.isnan(self.yaw_rad):
+            return self
+        return replace(self, yaw_rad=float(yaw_rad))
+
+    def age_s(self, now_s: float) -> float:
+        """How old this output is at `now_s`, s."""
+        return now_s - self.stamp_s
+
+
+def _finite_vec3(v: np.ndarray) -> np.ndarray:
+    out = np.array(v, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"setpoint vector must be finite, got {out}")
+    out.setflags(write=False)
+    return out
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,8 +11,8 @@ def test_bench_catenary_reports_the_issue_keys() -> None:
     result = CliRunner().invoke(app, ["bench", "catenary", "--trials", "1", "--json"])
     assert result.exit_code == 0, result.output
     report = json.loads(result.output)
-    assert 0.0 <= report["success_rate"] <= 1.0
-    assert report["median_fit_ms"] > 0.0
+    # one trial per scenario cell: every non-degenerate cell converges (measured 12/12)
+    assert report["success_rate"] >= 11 / 12
     assert report["vertex_error_m_median"] < 1.0
     cells = {(c["placement"], c["wire"], c["cameras"]) for c in report["scenarios"]}
     assert len(cells) == 12 and ("avoidance", "near_straight", 16) in cells

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from mapping.catenary_fit import fit_catenary, reconstruct_catenary
-from mapping.catenary_params import CatenaryParams
-from mapping.catenary_sim import (
+from mapping.catenary.fit import fit_catenary, reconstruct_catenary
+from mapping.catenary.params import CatenaryParams
+from mapping.catenary.sim import (
     curve_error_m,
     degenerate_two_camera_scenario,
     frustum_initialisation,

@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from mapping.catenary_instances import reconstruct_wires, track_wires, wire_instances
-from mapping.catenary_model import catenary_points_ned_m, sample_abscissae_m
-from mapping.catenary_obstacle import distance_to_polyline_m
-from mapping.catenary_params import CatenaryParams
-from mapping.catenary_sim import approach_scenario, cnn_like_mask, curve_error_m, sim_camera
+from geometry.shapes import distance_to_polyline_m
+from mapping.catenary.instances import reconstruct_wires, track_wires, wire_instances
+from mapping.catenary.model import catenary_points_ned_m, sample_abscissae_m
+from mapping.catenary.params import CatenaryParams
+from mapping.catenary.sim import approach_scenario, cnn_like_mask, curve_error_m, sim_camera
 
 CAMERA = sim_camera()
 PARAMS = CatenaryParams()

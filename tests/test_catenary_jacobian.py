@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from mapping.catenary_jacobian import project_catenary, residual_jacobian
-from mapping.catenary_kernel import residuals_and_jacobian
-from mapping.catenary_model import sample_abscissae_m
-from mapping.catenary_residuals import distance_lookup, normalised_distance_transform
-from mapping.catenary_sim import random_scenario, sim_camera
-from mapping.catenary_uncertainty import (
+from mapping.catenary.jacobian import project_catenary, residual_jacobian
+from mapping.catenary.kernel import residuals_and_jacobian
+from mapping.catenary.model import sample_abscissae_m
+from mapping.catenary.residuals import distance_lookup, normalised_distance_transform
+from mapping.catenary.sim import random_scenario, sim_camera
+from mapping.catenary.uncertainty import (
     inverse_depth_from_theta,
     theta_from_inverse_depth,
     theta_jacobian_wrt_inverse_depth,

@@ -2,8 +2,9 @@
 
 import numpy as np
 
-from mapping.catenary_keyframes import select_keyframes
-from mapping.catenary_model import (
+from geometry.keyframes import select_keyframes
+from geometry.pose import Pose
+from mapping.catenary.model import (
     catenary_points_jacobian,
     catenary_points_ned_m,
     catenary_tangents,
@@ -11,7 +12,6 @@ from mapping.catenary_model import (
     sag_height_m,
     sample_abscissae_m,
 )
-from mapping.pose import Pose
 
 THETA = np.array([3.0, -2.0, -10.0, 0.7, 12.0])
 

@@ -2,24 +2,25 @@
 
 import numpy as np
 import pytest
+from kinematic import flown_velocity
 
 from companion.config import Settings
-from mapping.camera import body_from_camera_from_params, stereo_rig_from_params, world_from_camera
-from mapping.catenary_instances import reconstruct_wires
-from mapping.catenary_mapper import CatenaryMapper
-from mapping.catenary_model import catenary_points_ned_m, sample_abscissae_m
-from mapping.catenary_obstacle import (
+from geometry.camera import body_from_camera_from_params, stereo_rig_from_params, world_from_camera
+from geometry.pose import Pose
+from geometry.shapes import distance_to_polyline_m
+from mapping.catenary.instances import reconstruct_wires
+from mapping.catenary.mapper import CatenaryMapper
+from mapping.catenary.model import catenary_points_ned_m, sample_abscissae_m
+from mapping.catenary.obstacle import (
     CatenaryAwareMap,
     WireObstacle,
     collision_map,
-    distance_to_polyline_m,
     inside_tube,
     projected_curve_mask,
     unexplained_wire_mask,
     wire_obstacle,
 )
-from mapping.droan import DroanMap
-from mapping.pose import Pose
+from mapping.droan.pose_graph import DroanMap
 from mapping.query import OccupancyQuery
 from planning.library import generate_library
 from planning.planner import LocalPlanner
@@ -146,7 +147,7 @@ def fly(
             setpoint = tracker.setpoint(
                 now_s, VehicleState(now_s, position, velocity, yaw), output.reference, goal
             )
-            velocity = setpoint.velocity_ned_mps
+            velocity = flown_velocity(setpoint, position)
             position = position + 0.05 * velocity
             yaw = setpoint.yaw_rad
             now_s += 0.05

@@ -5,8 +5,9 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
+from companion.cli.config_docs import configuration_markdown, settings_toml
+from companion.cli.settings import load_sim_settings
 from companion.config import load_settings
-from companion.config_docs import configuration_markdown, settings_toml
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -39,7 +40,15 @@ def test_unknown_key_and_out_of_bounds_value_are_rejected(tmp_path: Path) -> Non
         misspelt = tmp_path / f"{section}.toml"
         misspelt.write_text(f"[{section}]\nno_such_field = 1\n")
         with pytest.raises(ValidationError, match="no_such_field"):
-            load_settings(misspelt)
+            load_sim_settings(misspelt)
+
+
+def test_the_flight_process_rejects_the_simulator_sections(tmp_path: Path) -> None:
+    path = tmp_path / "drone.toml"
+    path.write_text("[vehicle_sim]\nmass_kg = 2.0\n")
+    assert load_sim_settings(path).vehicle_sim.mass_kg == 2.0
+    with pytest.raises(ValidationError, match="vehicle_sim"):
+        load_settings(path)
     negative = tmp_path / "negative.toml"
     negative.write_text("[mapping]\nrobot_radius_m = -1\n")
     with pytest.raises(ValidationError, match="robot_radius_m"):
@@ -47,14 +56,14 @@ def test_unknown_key_and_out_of_bounds_value_are_rejected(tmp_path: Path) -> Non
 
 
 def test_generated_toml_reads_back_to_the_same_settings(tmp_path: Path) -> None:
-    settings = load_settings()
+    settings = load_sim_settings()
     path = tmp_path / "roundtrip.toml"
     path.write_text(settings_toml(settings))
-    assert load_settings(path) == settings
+    assert load_sim_settings(path) == settings
 
 
 def test_every_setting_is_documented_and_the_reference_is_current() -> None:
-    for _, section in load_settings():
+    for _, section in load_sim_settings():
         for name, info in type(section).model_fields.items():
             assert info.description, f"{type(section).__name__}.{name} has no description"
     committed = (REPO / "docs" / "configuration.md").read_text()

@@ -4,12 +4,21 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from companion.cli import app
-from companion.demo_flight import DemoPattern, FlightSummary, LegResult, verdict
-from companion.vehicle_link import LinkEvent, LinkEventKind
+from companion.cli.demo_flight import (
+    DemoPattern,
+    FlightSummary,
+    LegResult,
+    _velocity_verdict,
+    verdict,
+)
+from companion.link.vehicle_link import LinkEvent, LinkEventKind
+from hil.vehicle.multirotor import Multirotor
+from hil.vehicle.params import VehicleSimParams
 
 
 def _leg(name: str, ok: bool = True, error: float = 0.1) -> LegResult:
@@ -39,12 +48,6 @@ def test_summary_text_names_each_leg_and_the_verdict():
     assert json.loads(summary.to_json())["legs"][1]["ok"] is False
 
 
-def test_demo_pattern_defaults_fly_a_closed_square():
-    p = DemoPattern()
-    assert p.square_speed_mps > 0 and p.square_leg_s > 0
-    assert 0 < p.settle_fraction < 1
-
-
 @pytest.mark.slow
 @pytest.mark.timeout(60)
 def test_fly_pattern_command_flies_the_sim_vehicle_and_passes():
@@ -60,3 +63,38 @@ def test_fly_pattern_command_flies_the_sim_vehicle_and_passes():
         assert leg["truth_error"] is not None and leg["truth_error"] <= leg["tolerance"]
     assert summary["watchdog_events"] == 0
     assert summary["speed"] == 3.0
+    # PX4's default failsafe (COM_OBL_RC_ACT 0, no RC: Return to 30 m) is flagged, not flown
+    assert any(line.startswith("refuse: offboard loss") for line in summary["preflight"])
+    kinds = {event["kind"] for event in summary["events"]}
+    assert {"vehicle_event", "arming_check"} <= kinds  # PX4's events, decoded by MAVSDK
+
+
+def _side_samples(params, velocity_ned_mps: np.ndarray, pattern: DemoPattern) -> list[np.ndarray]:
+    """Velocities in the steady-state window of one square side, flown in lockstep."""
+    vehicle = Multirotor(params)
+    vehicle.reset(np.array([0.0, 0.0, -3.0]), 0.0)
+    vehicle.set_velocity_setpoint(velocity_ned_mps, yaw_rad=0.0)
+    dt_s = 0.05
+    steps = round(pattern.square_leg_s / dt_s)
+    states = [vehicle.step(dt_s) for _ in range(steps)]
+    window = states[round(steps * (1.0 - pattern.settle_fraction)) :]
+    return [np.asarray(s.velocity_ned_mps) for s in window]
+
+
+def test_velocity_grading_passes_a_healthy_px4_and_fails_a_broken_one():
+    """The grading fly-pattern applies to PX4 SITL and the hil vehicle alike, on the PX4
+    controller: default gains pass; a halved velocity gain, a wrong frame or a unit error fail."""
+    pattern = DemoPattern()
+    command = np.array([2.0, 0.0, 0.0])
+    healthy = VehicleSimParams()
+    _, ok, why = _velocity_verdict(_side_samples(healthy, command, pattern), command, pattern)
+    assert ok, why
+    sluggish = healthy.model_copy(update={"xy_vel_p": 0.6, "xy_vel_i": 0.1})
+    _, ok, why = _velocity_verdict(_side_samples(sluggish, command, pattern), command, pattern)
+    assert not ok and "of the speed along" in why
+    # east flown when north was asked (a frame swap), twice the speed (a unit error)
+    samples = _side_samples(healthy, command, pattern)
+    swapped = [s[[1, 0, 2]] for s in samples]
+    assert not _velocity_verdict(swapped, command, pattern)[1]
+    assert not _velocity_verdict([2.0 * s for s in samples], command, pattern)[1]
+    assert not _velocity_verdict([], command, pattern)[1]

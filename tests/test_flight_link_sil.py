@@ -1,6 +1,6 @@
 """The MAVSDK flight link against the hil vehicle over real UDP, with the real MAVSDK.
 
-Each test starts its own `hil.vehicle_server.VehicleServer` on a free port, faster than real
+Each test starts its own `hil.mavlink.server.VehicleServer` on a free port, faster than real
 time (`SPEED`), and checks the link's behaviour against the simulator's ground truth.
 """
 
@@ -15,17 +15,17 @@ from collections.abc import AsyncIterator, Callable, Iterator
 import numpy as np
 import pytest
 
-from companion.config import LinkParams
-from companion.demo_flight import DemoPattern, fly_pattern, free_udp_port
-from companion.setpoints import Setpoint
-from companion.telemetry import FlightMode
-from companion.vehicle_link import LinkError, LinkEventKind, LinkState, VehicleLink
-from hil.params import VehicleSimParams
-from hil.vehicle_server import VehicleServer
+from companion.cli.demo_flight import DemoPattern, fly_pattern, free_udp_port
+from companion.link.params import LinkParams
+from companion.link.telemetry import FlightMode
+from companion.link.vehicle_link import LinkError, LinkEventKind, LinkState, VehicleLink
+from hil.mavlink.server import VehicleServer
+from hil.vehicle.params import VehicleSimParams
+from planning.types import Setpoint
 
 os.environ.setdefault("MAVLINK20", "1")
 
-SPEED = 3.0  # real-time factor of the simulator in these tests
+SPEED = 4.0  # real-time factor of the simulator (MAVSDK's 1 Hz heartbeat < COM_OBC_LOSS_T)
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -121,25 +121,32 @@ async def test_link_flies_square_and_position_measured_against_truth():
             "position",
             "land",
         ]
+        # graded as PX4 is: every leg passed (the same grading flies PX4 SITL, test_px4_sitl)
+        assert all(leg.ok for leg in legs), [leg for leg in legs if not leg.ok]
         takeoff = by_name["takeoff"]
-        assert takeoff.error < 0.3 and takeoff.truth_error is not None
-        assert takeoff.truth_error < 0.3
+        assert takeoff.error < 0.5 and takeoff.truth_error is not None
+        assert takeoff.truth_error < 0.5
         for name in ("velocity north", "velocity east", "velocity south", "velocity west"):
             leg = by_name[name]
-            # steady-state velocity, measured from telemetry and from ground truth
-            assert leg.error < 0.25, leg
-            assert leg.truth_error is not None and leg.truth_error < 0.25, leg
+            # the steady-state window, from telemetry and from ground truth: PX4's velocity
+            # integrator against SIH's drag leaves 2 m/s at 70-85% after 2-4 s (PX4 SITL too)
+            achieved = np.array(leg.achieved)
+            commanded = np.array(leg.commanded)
+            along = float(achieved @ commanded) / float(commanded @ commanded)
+            assert 0.7 < along < 0.9, leg
+            assert leg.truth_error is not None and abs(leg.truth_error - leg.error) < 0.1, leg
         position = by_name["position"]
         assert position.detail == "settled"
-        assert position.error < 0.3 and position.truth_error is not None
-        assert position.truth_error < 0.3
+        assert position.error < 0.5 and position.truth_error is not None
+        assert position.truth_error < 0.5
+        assert by_name["land"].ok and "ON_GROUND" in by_name["land"].detail
         assert final.on_ground and not server.armed
         assert -final.position_ned_m[2] < 0.2
         # landed where the position leg ended: Land descends vertically
         target = np.array(position.commanded)
-        assert np.linalg.norm(final.position_ned_m[:2] - target[:2]) < 0.5
+        assert np.linalg.norm(final.position_ned_m[:2] - target[:2]) < 0.7
         assert link.events_of(LinkEventKind.WATCHDOG_BRAKE) == []
-        assert link.setpoints_sent > 20 * (4 * 3.0 / SPEED)  # >= 20 Hz during the square
+        assert link.setpoints_sent > 20 * (4 * 4.0 / SPEED)  # >= 20 Hz during the square
 
 
 async def test_offboard_entry_pre_streams_and_is_confirmed_by_flight_mode():
@@ -176,7 +183,7 @@ async def test_planner_stall_brakes_then_holds():
         await _publish_until(
             link,
             lambda now: Setpoint.velocity(v_cmd, yaw, now),
-            lambda: server.truth().velocity_ned_mps[0] > 1.8,
+            lambda: server.truth().velocity_ned_mps[0] > 1.5,
             5.0,
         )
         stall_s = link.setpoints.latest().stamp_s
@@ -194,53 +201,95 @@ async def test_planner_stall_brakes_then_holds():
         assert brakes[0].stamp_s - stall_s < 0.6
         assert holds[0].stamp_s > brakes[0].stamp_s
         assert not link.offboard_engaged
-        # braked: slow when Hold was requested, and stopped short (no fly-away at 2 m/s)
+        # braked: slow when Hold was requested, and stopped short (no fly-away at 2 m/s):
+        # 0.6 s of stale plan at ~1.6 m/s, then PX4's brake (1.9 m from 2 m/s in PX4 SITL)
         truth = server.truth()
         assert np.linalg.norm(truth.velocity_ned_mps) < 0.3
-        assert np.linalg.norm(truth.position_ned_m - stall_position) < 3.0
+        assert np.linalg.norm(truth.position_ned_m - stall_position) < 4.0
         await asyncio.sleep(1.0 / SPEED)
         assert link.telemetry().flight_mode is FlightMode.HOLD
 
 
+@pytest.mark.parametrize("trajectory", [True, False], ids=["trajectory", "velocity"])
+async def test_trajectory_setpoints_hold_the_vehicle_on_a_moving_reference(trajectory: bool):
+    """PX4's velocity loop lags a 2 m/s command by metres (SIH drag against its integrator);
+    a TRAJECTORY setpoint (position + velocity feed-forward) lets its position loop close it."""
+    async with _flying() as (server, link):
+        yaw = link.telemetry().attitude.yaw_rad
+        start = server.truth().position_ned_m.copy()
+        velocity = np.array([2.0, 0.0, 0.0])
+        await link.start_offboard(Setpoint.position(start, yaw, link.now_s()))
+        t0 = server.time_s
+
+        def reference(now_s: float) -> Setpoint:
+            position = start + velocity * (server.time_s - t0)
+            if trajectory:
+                return Setpoint.trajectory(position, velocity, yaw, now_s)
+            return Setpoint.velocity(velocity, yaw, now_s)
+
+        errors: list[float] = []
+
+        def sample() -> bool:
+            lag = start + velocity * (server.time_s - t0) - server.truth().position_ned_m
+            if server.time_s - t0 > 4.0:
+                errors.append(float(np.linalg.norm(lag)))
+            return server.time_s - t0 > 8.0
+
+        await _publish_until(link, reference, sample, 8.0 / SPEED + 5.0)
+        steady = float(np.median(errors))
+        # measured: 0.53 m (of which up to 0.4 m is the setpoint's age: 20 Hz on the wall
+        # clock is 0.2 s of simulated time at SPEED 4), against 3.4 m for velocity setpoints
+        if trajectory:
+            assert steady < 0.8
+        else:
+            assert steady > 2.0  # the lag the trajectory setpoint removes
+
+
 @pytest.mark.parametrize(
-    ("vehicle", "timeout_s", "earliest_s"),
+    ("vehicle", "timeout_s", "earliest_s", "failsafe_mode"),
     [
-        # COM_OF_LOSS_T: 1 s after the last setpoint (MAVSDK re-sent them until destroyed)
-        ({}, 1.0, 1.0),
-        # COM_OBC_LOSS_T alone: proves the vehicle took our MAVSDK heartbeat for an onboard
-        # controller's; MAVSDK beats at 1 Hz wall = SPEED s of vehicle time
-        ({"offboard_loss_timeout_s": 60.0}, 5.0, 5.0 - SPEED),
+        # COM_OF_LOSS_T: 1 s after the last setpoint (MAVSDK re-sent them until destroyed);
+        # COM_OBL_RC_ACT 0 without RC is Return, as on PX4
+        # (the last setpoint left up to one 20 Hz wall tick = SPEED / 20 s before t_alive)
+        ({}, 1.0, 1.0 - SPEED / 20 - 0.05, "RTL"),
+        # COM_OBL_RC_ACT 5: Hold
+        ({"offboard_loss_action": 5}, 1.0, 1.0 - SPEED / 20 - 0.05, "HOLD"),
     ],
-    ids=["offboard-loss", "companion-heartbeat-loss"],
+    ids=["offboard-loss-return", "offboard-loss-hold"],
 )
-async def test_failsafe_to_hold_when_companion_dies(
-    vehicle: dict[str, object], timeout_s: float, earliest_s: float
+async def test_failsafe_when_companion_dies(
+    vehicle: dict[str, object], timeout_s: float, earliest_s: float, failsafe_mode: str
 ):
-    """Our process vanishes mid-offboard (no setpoints, no heartbeat): the vehicle holds."""
+    """Our process vanishes mid-offboard (no setpoints, no heartbeat): the vehicle's failsafe
+    takes the COM_OBL_RC_ACT action."""
     async with _flying(vehicle) as (server, link):
         yaw = link.telemetry().attitude.yaw_rad
         await link.start_offboard(Setpoint.velocity(np.zeros(3), yaw, link.now_s()))
         await _publish_until(
             link,
             lambda now: Setpoint.velocity(np.array([1.0, 0.0, 0.0]), yaw, now),
-            lambda: server.truth().velocity_ned_mps[0] > 0.8,
+            lambda: server.truth().velocity_ned_mps[0] > 0.7,
             5.0,
         )
         assert _mode(server) == "OFFBOARD"
         t_alive = server.time_s
         await link.close()  # MAVSDK destroyed: its setpoints and heartbeats stop
         t_dead = server.time_s
-        t_hold = math.inf
+        t_failsafe = math.inf
         while server.time_s < t_dead + timeout_s + 3.0:
-            if _mode(server) == "HOLD":
-                t_hold = server.time_s
+            if _mode(server) != "OFFBOARD":
+                t_failsafe = server.time_s
                 break
             await asyncio.sleep(0.01)
         # the failsafe fires `timeout_s` after the last message, which left between
         # t_alive - (earliest margin) and t_dead (plus a physics step and our 10 ms polling)
-        assert t_alive + earliest_s <= t_hold <= t_dead + timeout_s + 0.1
-        await _wait(lambda: np.linalg.norm(server.truth().velocity_ned_mps) < 0.2, 10.0, "stopping")
+        assert t_alive + earliest_s <= t_failsafe <= t_dead + timeout_s + 0.1
+        assert _mode(server) == failsafe_mode
         assert server.armed and not server.truth().on_ground
+        if failsafe_mode == "HOLD":
+            await _wait(
+                lambda: np.linalg.norm(server.truth().velocity_ned_mps) < 0.2, 10.0, "stopping"
+            )
 
 
 async def test_offboard_refused_without_recent_setpoint():
@@ -289,6 +338,26 @@ async def test_offboard_refused_without_recent_setpoint():
                 streamer.cancel()
         finally:
             conn.close()
+
+
+async def test_companion_heartbeat_loss_is_warned_by_the_vehicle():
+    """Our MAVSDK heartbeat is an onboard controller's (COM_OBC_LOSS_T): when it stops, PX4
+    warns; the offboard loss is what acts."""
+    async with _flying({"offboard_loss_timeout_s": 60.0}) as (server, link):
+        yaw = link.telemetry().attitude.yaw_rad
+        await link.start_offboard(Setpoint.velocity(np.zeros(3), yaw, link.now_s()))
+        await link.close()  # heartbeats stop; no setpoint for 60 s is not yet a loss
+        t_dead = server.time_s
+        timeout_s = server.params.companion_loss_timeout_s
+
+        def warned(vehicle) -> bool:
+            return vehicle.companion_lost
+
+        assert not server.with_vehicle(warned)
+        # MAVSDK beats at 1 Hz wall = SPEED s of vehicle time: the last beat was within that
+        await _wait(lambda: server.with_vehicle(warned), (timeout_s + SPEED) / SPEED + 2, "warning")
+        assert t_dead + timeout_s - SPEED <= server.time_s <= t_dead + timeout_s + 1.0
+        assert _mode(server) == "OFFBOARD"
 
 
 async def test_arming_denied_after_boot_then_succeeds():

@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from companion.config import LinkParams
+from companion.link.params import LinkParams
+from companion.link.setpoints import SetpointSource
+from companion.link.telemetry import FlightMode, Health, LandedState, TelemetryCache
+from companion.link.watchdog import SetpointWatchdog, WatchdogAction
 from companion.rate import RateKeeper, next_tick
-from companion.setpoints import Setpoint, SetpointKind, SetpointSource
-from companion.telemetry import FlightMode, Health, LandedState, TelemetryCache
-from companion.watchdog import SetpointWatchdog, WatchdogAction
+from planning.types import Setpoint, SetpointKind
 
 
 class SimClock:
@@ -186,7 +187,7 @@ def test_setpoint_yaw_fill_and_age():
     assert sp.with_yaw(0.5).yaw_rad == 0.5
     assert Setpoint.position([0, 0, -3], 1.0, 3.0).with_yaw(0.5).yaw_rad == 1.0
     assert sp.age_s(3.4) == pytest.approx(0.4)
-    assert np.array_equal(Setpoint.brake(0.2, 1.0).vector_ned, np.zeros(3))
+    assert np.array_equal(Setpoint.brake(0.2, 1.0).velocity_ned_mps, np.zeros(3))
 
 
 def test_setpoint_rejects_nonfinite_vector():

@@ -1,7 +1,7 @@
 """`wireavoid bench mapping` on a short sequence: JSON contract and agreement with OctoMap."""
 
-from companion.bench_mapping import run_mapping_benchmark
-from mapping.params import MappingParams
+from companion.cli.bench_mapping import run_mapping_benchmark
+from mapping.droan.params import MappingParams
 
 KEYS = {
     "droan_update_ms",

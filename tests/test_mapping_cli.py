@@ -8,9 +8,9 @@ import numpy as np
 from typer.testing import CliRunner
 
 from companion.cli import app
-from companion.cli_mapping import _simulated_board_shots
-from mapping.camera import stereo_rig_from_params
-from mapping.params import MappingParams
+from companion.cli.mapping import _simulated_board_shots
+from geometry.camera import stereo_rig_from_params
+from mapping.droan.params import MappingParams
 
 
 def test_calibrate_sigma_reads_a_sample_folder(tmp_path: Path) -> None:

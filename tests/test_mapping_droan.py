@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from mapping.camera import body_from_camera_mount, stereo_rig_from_params, world_from_camera
-from mapping.droan import DroanMap, InsertResult
-from mapping.params import MappingParams
-from mapping.pose import Pose
+from geometry.camera import body_from_camera_mount, stereo_rig_from_params, world_from_camera
+from geometry.pose import Pose
+from mapping.droan.params import MappingParams
+from mapping.droan.pose_graph import DroanMap, InsertResult
 
 PARAMS = MappingParams()
 RIG = stereo_rig_from_params(PARAMS.camera)
@@ -79,6 +79,25 @@ def test_wire_row_occupies_the_prior_slab_of_its_rays() -> None:
     assert not high.collision.any()
 
 
+def test_views_nearer_than_the_wire_prior_do_not_vote_a_wire_away() -> None:
+    """A wire 8 m ahead stays mapped while the vehicle closes in on it: views from within
+    the near prior (4 m) see it on their wire rays but nearer than their slab; before, each
+    voted -wire_free_weight and two of them erased the wire the vehicle was about to pass."""
+    droan = DroanMap(RIG, PARAMS.model_copy(update={"keyframe_translation_m": 0.1}))
+    mask = np.zeros(SHAPE, bool)
+    mask[239:241, :] = True  # a horizontal wire through the optical axis
+    sky = np.zeros(SHAPE, np.float32)
+    droan.insert(0.0, camera_at(0, 0, -5), sky, mask)
+    wire = along_axis([8.0])
+    assert droan.query(wire).collision[0]
+    for step, north_m in enumerate([5.0, 5.5, 6.0, 6.5]):  # 3 to 1.5 m from the wire
+        droan.insert(1.0 + step, camera_at(north_m, 0, -5), sky, mask)
+    assert droan.query(wire).occupancy[0] == pytest.approx(1.0)  # the far view's vote alone
+    # a near view that sees no wire there still says nothing about it
+    droan.insert(9.0, camera_at(7.0, 0, -5), sky, np.zeros(SHAPE, bool))
+    assert droan.query(wire).collision[0]
+
+
 def test_unseen_space_is_unknown() -> None:
     droan = DroanMap(RIG, PARAMS)
     assert not droan.query(along_axis([3.0])).seen.any()  # empty graph
@@ -132,7 +151,7 @@ def test_dropping_non_keyframes_and_age_limit() -> None:
 
 
 def test_export_returns_the_occupied_band_as_voxels() -> None:
-    from mapping.export import occupied_voxels, ply_bytes
+    from mapping.droan.export import occupied_voxels, ply_bytes
 
     droan = DroanMap(RIG, PARAMS)
     droan.insert(0.0, camera_at(0, 0, -5), np.full(SHAPE, BF / 5.0, np.float32))

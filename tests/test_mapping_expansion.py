@@ -3,9 +3,14 @@
 import numpy as np
 import pytest
 
-from mapping.camera import PinholeCamera, StereoRig, stereo_rig_from_params
-from mapping.expansion import DisparityExpander, back_disparity, expansion_lut, front_disparity
-from mapping.params import MappingParams
+from geometry.camera import PinholeCamera, StereoRig, stereo_rig_from_params
+from mapping.droan.expansion import (
+    DisparityExpander,
+    back_disparity,
+    expansion_lut,
+    front_disparity,
+)
+from mapping.droan.params import MappingParams
 
 PARAMS = MappingParams()
 RIG = stereo_rig_from_params(PARAMS.camera)
@@ -101,3 +106,18 @@ def test_the_area_lut_is_looked_up_at_d_plus_lambda_sigma() -> None:
     assert reach_px(10.0) >= needed_px(boosted) + 4 - PARAMS.pool_factor
     # the window widens as the LUT's disparity does (a lookup at d would not move at all)
     assert reach_px(10.0) - reach_px(0.0) >= grows_px - PARAMS.pool_factor
+
+
+def test_a_wire_mask_of_a_registered_lower_resolution_camera_lands_on_the_same_cells() -> None:
+    expander = DisparityExpander(RIG, PARAMS)
+    full = np.zeros(RIG.camera.shape, bool)
+    full[200:202, 100:500] = True  # a wire 2 px thick on the 640x480 disparity camera
+    half = full[::2, ::2]  # the same wire seen by a colour camera at 320x240
+    a, b = expander.expand_wire(full), expander.expand_wire(half)
+    np.testing.assert_array_equal(a.front_px, b.front_px)
+    np.testing.assert_array_equal(a.back_px, b.back_px)
+    assert (a.front_px > 0).any()
+    with pytest.raises(ValueError, match="down-scale"):
+        expander.expand_wire(np.zeros((100, 100), bool))
+    with pytest.raises(ValueError, match="down-scale"):  # 3 does not divide the 4x pooling
+        expander.expand_wire(np.zeros((160, 213), bool))

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from mapping.occupancy import (
+from mapping.droan.occupancy import (
     confidence,
     confidence_odds,
     occupancy_measure,
@@ -13,6 +13,7 @@ from mapping.occupancy import (
 
 H, W, NODES = 12, 16, 5
 SIGMA, FREE, OCCLUDED, WIRE_FREE, BF, NEAR, FAR = 0.23, 0.5, 0.25, 1.5, 40.0, 1e-3, 30.0
+WIRE_NEAR = 6.0  # px: the slab fronts are drawn from [2, 10]
 
 
 def random_graph(rng: np.random.Generator):
@@ -52,7 +53,7 @@ def numpy_reference(points, projection, offset, slots, images):
     stereo, observed = stereo_occupancy_cost(
         d, *np.moveaxis(cells[..., :4], -1, 0), SIGMA, FREE, OCCLUDED
     )
-    wire = wire_occupancy_cost(d, cells[..., 4], cells[..., 5], WIRE_FREE)
+    wire = wire_occupancy_cost(d, cells[..., 4], cells[..., 5], WIRE_FREE, WIRE_NEAR)
     return np.maximum(occupancy_measure(stereo), occupancy_measure(wire)), observed.any(axis=0)
 
 
@@ -65,7 +66,8 @@ def test_the_kernel_answers_as_the_numpy_definition() -> None:
     f32 = np.float32
     occupancy, seen = summed_costs(
         points, projection, offset, slots, images, H, W,
-        f32(BF), f32(NEAR), f32(FAR), f32(SIGMA), f32(FREE), f32(OCCLUDED), f32(WIRE_FREE),
+        f32(BF), f32(NEAR), f32(FAR), f32(SIGMA), f32(FREE), f32(OCCLUDED),
+        f32(WIRE_FREE), f32(WIRE_NEAR),
     )  # fmt: skip
     expected_occupancy, expected_seen = numpy_reference(points, projection, offset, slots, images)
     assert 0.1 < seen.mean() < 0.95 and 0.05 < (occupancy > 1.0).mean() < 0.95

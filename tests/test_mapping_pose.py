@@ -1,9 +1,9 @@
-"""Rigid transforms, camera model and pose interpolation (mapping.pose, mapping.camera)."""
+"""Rigid transforms, camera model and pose interpolation (geometry.pose, geometry.camera)."""
 
 import numpy as np
 import pytest
 
-from mapping.camera import (
+from geometry.camera import (
     PinholeCamera,
     StereoRig,
     body_from_camera_from_params,
@@ -11,8 +11,9 @@ from mapping.camera import (
     stereo_rig_from_params,
     world_from_camera,
 )
-from mapping.params import MappingParams
-from mapping.pose import Pose, PoseHistory, quaternion_from_rotation, rotation_from_quaternion
+from geometry.pose import Pose, PoseHistory
+from geometry.rotation import quaternion_from_rotation, rotation_from_quaternion
+from mapping.droan.params import MappingParams
 
 
 def test_compose_inverse_and_apply_round_trip() -> None:

@@ -2,13 +2,13 @@
 
 import numpy as np
 
-from hil.camera_params import CameraSimParams
-from hil.cameras import SimulatedStereoCamera
-from hil.world import World, catenary_wire
-from mapping.camera import body_from_camera_from_params, stereo_rig_from_params
-from mapping.droan import DroanMap
-from mapping.params import MappingParams
-from mapping.pose import Pose
+from geometry.camera import body_from_camera_from_params, stereo_rig_from_params
+from geometry.pose import Pose
+from hil.sensors.cameras import SimulatedStereoCamera
+from hil.sensors.params import CameraSimParams
+from hil.world.model import World, catenary_wire
+from mapping.droan.params import MappingParams
+from mapping.droan.pose_graph import DroanMap
 
 WIRE_HEIGHTS_M = (6.0, 9.0, 12.0)
 WIRE_NORTH_M = 10.0
@@ -30,8 +30,9 @@ def fused_map(altitudes_m: np.ndarray, wire_free_weight: float = 0.5) -> DroanMa
         ]
     )
     camera = SimulatedStereoCamera(
-        world, rig, body_from_camera_from_params(params.camera), CameraSimParams()
-    )
+        world, rig, body_from_camera_from_params(params.camera), CameraSimParams(),
+        colour_downscale=2,
+    )  # fmt: skip
     droan = DroanMap(rig, params)
     for i, altitude in enumerate(altitudes_m):
         frame = camera.render(0.1 * i, Pose.from_yaw_pitch_roll(0, 0, 0, [0, 0, -altitude]))

@@ -6,7 +6,13 @@ import cv2
 import numpy as np
 import pytest
 
-from perception.baseline import candamo_scores, filtered_edges, rasterised_lines, window_lines
+from perception.baseline import (
+    candamo_scores,
+    filtered_edges,
+    lsd_scores,
+    rasterised_lines,
+    window_lines,
+)
 from perception.metrics import evaluate_predictions
 from perception.params import PerceptionParams
 from perception.postprocess import remove_small_components, wire_mask
@@ -86,3 +92,28 @@ def test_baseline_on_a_flat_image_and_single_window():
     assert 1 <= len(lines) <= one_window.baseline_max_lines_per_window
     # the wire direction: y = 60 + 110/319 x -> normal angle theta = atan2(319, -110) ~ 109 deg
     assert np.degrees(lines[0, 1]) == pytest.approx(np.degrees(np.arctan2(319, -110)), abs=2)
+
+
+def test_lsd_baseline_draws_segments_with_their_width_and_scores_them_by_length():
+    image = np.full((120, 400), 200, np.uint8)
+    cv2.line(image, (10, 30), (390, 30), 40, 3)  # a long dark wire, 380 px
+    cv2.line(image, (100, 90), (160, 90), 40, 3)  # a short dark stroke, 60 px
+    scores = lsd_scores(image, PerceptionParams(lsd_baseline_full_length_px=200.0))
+    assert scores[28:33, 50:350].max(axis=0).min() == pytest.approx(1.0)  # long: saturated
+    short = scores[88:93, 110:150].max()
+    assert 0.2 < short < 0.35  # LSD finds the stroke's edges, ~60 px of 200
+    assert scores[50:70].max() == 0.0 and scores[:20].max() == 0.0  # nothing in flat areas
+    # a fixed 2-px drawing marks a narrower band around each edge than 6 px does
+    wide = lsd_scores(image, PerceptionParams(lsd_baseline_width_px=6))
+    assert (wide > 0).sum() > 1.5 * (scores > 0).sum()
+
+
+def test_lsd_baseline_finds_a_dark_line_on_blurred_noise():
+    rng = np.random.default_rng(0)
+    image = (rng.normal(120, 25, (160, 240))).clip(0, 255).astype(np.uint8)
+    image = cv2.GaussianBlur(image, (0, 0), 2.0)
+    truth = np.zeros_like(image)
+    cv2.line(image, (0, 40), (239, 120), 20, 2)
+    cv2.line(truth, (0, 40), (239, 120), 1, 2)
+    result = evaluate_predictions([lsd_scores(image)], [truth], tolerance_px=2)
+    assert result.ods_f1 > 0.8

@@ -114,8 +114,8 @@ def test_perception_model_without_shipped_weights_is_a_clear_error():
 def test_shipped_model_beats_the_candamo_baseline_on_held_out_synthetic_wires(arch):
     from perception.baseline import candamo_scores
     from perception.metrics import evaluate_predictions
-    from perception.synthetic import synthetic_sample
-    from perception.training import HELD_OUT_SEED
+    from perception.training.loop import HELD_OUT_SEED
+    from perception.training.synthetic import synthetic_sample
 
     # perception.model picks the shipped weights in perception/weights
     seg = WireSegmenter.load(runtime="torch", params=PerceptionParams(model=arch))

@@ -4,34 +4,29 @@ import cv2
 import numpy as np
 import pytest
 
-from perception.backgrounds import Horizon, add_distractors
+from geometry.camera import PinholeCamera
 from perception.params import SyntheticParams
-from perception.synthetic import (
-    Camera,
+from perception.training.backgrounds import Horizon, add_distractors
+from perception.training.labels import label_mask, rasterise
+from perception.training.loop import HELD_OUT_SEED
+from perception.training.synthetic import (
     SyntheticWireDataset,
     WireBundle,
     catenary_height_m,
     composite_wires,
     horizon_of,
-    label_mask,
-    rasterise,
+    level_view,
     rendered_sample,
-    rotation_world_from_body,
     synthetic_sample,
     wire_segments,
     with_local_contrast,
     write_dataset,
 )
-from perception.training import HELD_OUT_SEED
-
-R_CAM_FROM_BODY = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
 def level_camera(w=160, h=120, altitude_m=10.0, pitch_rad=0.0, roll_rad=0.0):
-    r_wb = rotation_world_from_body(roll_rad, pitch_rad, 0.0)
-    return Camera(
-        100.0, 100.0, w / 2, h / 2, w, h, np.array([0, 0, -altitude_m]), R_CAM_FROM_BODY @ r_wb.T
-    )
+    camera = PinholeCamera(100.0, 100.0, w / 2, h / 2, w, h)
+    return level_view(camera, np.array([0, 0, -altitude_m]), pitch_rad, roll_rad)
 
 
 def east_wire(distance_m=20.0, height_m=10.0, diameter_m=0.4, floor_px=0.3, material="dark"):
@@ -42,7 +37,7 @@ def east_wire(distance_m=20.0, height_m=10.0, diameter_m=0.4, floor_px=0.3, mate
 
 
 def render(bundle, cam, seed=0):
-    grey = np.full((cam.height_px, cam.width_px, 3), 0.8, np.float32)
+    grey = np.full((cam.camera.height_px, cam.camera.width_px, 3), 0.8, np.float32)
     image, mask, _ = composite_wires(
         np.random.default_rng(seed), grey, [bundle], cam, SyntheticParams()
     )
@@ -73,7 +68,7 @@ def test_thick_wire_mask_matches_its_pixels():
     image, mask = render(east_wire(diameter_m=0.8), cam)  # 0.8 m at 20 m with fx 100: 4 px
     rows = np.nonzero(mask.any(axis=1))[0]
     assert mask.any(axis=0).all()  # labelled across the whole image
-    assert 3 <= len(rows) <= 5 and abs(rows.mean() - cam.cy_px) <= 1.0
+    assert 3 <= len(rows) <= 5 and abs(rows.mean() - cam.camera.cy_px) <= 1.0
     darkening = 0.8 - image.mean(axis=2)
     assert (darkening[mask > 0] > 0.2).mean() > 0.95  # labelled pixels show the wire
     assert (darkening[mask == 0] < 0.6).all()  # strongly covered pixels are labelled
@@ -106,13 +101,13 @@ def test_poles_and_distractors_are_never_labelled():
     with_pole = WireBundle(bundle.conductors_ned_m, 0.05, 0.3, "dark", (pole,))
     image, mask = render(with_pole, cam)
     segments, widths, _ = wire_segments(bundle, cam, 12)
-    coverage = rasterise(segments, widths, cam.height_px, cam.width_px, 4)
+    coverage = rasterise(segments, widths, cam.camera.height_px, cam.camera.width_px, 4)
     assert np.array_equal(mask, label_mask(segments, coverage))
-    pole_column = round(cam.cx_px + 100 * 5 / 20)
-    top_v = round(cam.cy_px - 100 * 4 / 20)  # pole top 4 m above the camera, 20 m ahead
+    pole_column = round(cam.camera.cx_px + 100 * 5 / 20)
+    top_v = round(cam.camera.cy_px - 100 * 4 / 20)  # pole top 4 m above the camera, 20 m ahead
     assert (0.8 - image[top_v + 2 : top_v + 16, pole_column].mean(axis=1) > 0.1).all()
-    assert not mask[: int(cam.cy_px) - 3, pole_column].any()
-    assert not mask[int(cam.cy_px) + 3 :, pole_column].any()
+    assert not mask[: int(cam.camera.cy_px) - 3, pole_column].any()
+    assert not mask[int(cam.camera.cy_px) + 3 :, pole_column].any()
 
 
 def test_images_without_wires_have_empty_masks_despite_straight_edges():
@@ -184,7 +179,7 @@ def test_wire_colour_keeps_a_least_contrast_to_its_background():
 
 
 def test_labels_lie_on_the_rendered_wires_and_bound_the_exact_metric():
-    from perception.training import coverage_ceiling_ap
+    from perception.training.loop import coverage_ceiling_ap
 
     samples = [rendered_sample(HELD_OUT_SEED, i, 120, 160) for i in range(16)]
     masks = [s[1] for s in samples]
@@ -208,3 +203,62 @@ def test_label_is_the_centreline_plus_the_pixels_the_wire_covers_at_least_half(
     mask = label_mask(segments, coverage)
     assert np.flatnonzero(mask.max(axis=1)).tolist() == rows  # sub-pixel: 1 px; straddling: both
     assert (mask[rows, 1:-1] == 1).all() and (coverage[mask == 0] < 0.5).all()
+
+
+def aerial_camera(pitch_deg=-60.0, altitude_m=30.0, w=160, h=120):
+    camera = PinholeCamera(90.0, 90.0, w / 2, h / 2, w, h)
+    return level_view(camera, np.array([0.0, 0.0, -altitude_m]), np.deg2rad(pitch_deg), 0.05)
+
+
+def test_ground_homography_maps_texture_pixels_where_the_camera_projects_them():
+    from perception.training.aerial import ground_homography
+
+    cam = aerial_camera()
+    origin, res = np.array([-20.0, -35.0]), 0.1
+    homography = ground_homography(
+        cam.camera_from_world.rotation, cam.position_ned_m, cam.camera.intrinsic_matrix(),
+        origin, res,
+    )  # fmt: skip
+    tex = np.array([[10.0, 20.0], [300.0, 450.0], [600.0, 100.0]])  # (tu, tv) px
+    ground = np.stack([origin[0] + tex[:, 1] * res, origin[1] + tex[:, 0] * res, 0 * tex[:, 0]], 1)
+    expected, depth = cam.project(ground)
+    assert (depth > 0).all()
+    mapped = cv2.perspectiveTransform(tex[None], homography)[0]
+    np.testing.assert_allclose(mapped, expected, atol=1e-6)
+
+
+def test_aerial_views_look_down_at_cluttered_ground_and_label_only_wires():
+    params = SyntheticParams(aerial_probability=1.0, no_wire_probability=1.0)
+    edges = 0
+    for i in range(6):
+        image, mask = synthetic_sample(7, i, 96, 128, params)
+        assert not mask.any()  # lane markings, kerbs, roofs, rows and shadows are no wires
+        edges += int((cv2.Canny(image, 50, 150) > 0).sum())
+    assert edges > 6 * 96 * 128 * 0.01
+    wired = SyntheticParams(aerial_probability=1.0, fittings_probability=1.0, tower_probability=1.0)
+    masks = [synthetic_sample(8, i, 96, 128, wired)[1] for i in range(12)]
+    assert sum(m.any() for m in masks) >= 8
+    widths = [m.sum() / max(1, m.any(axis=1).sum()) for m in masks if m.any()]
+    assert max(widths) > 1.5  # the aerial width floor reaches several pixels
+
+
+def test_wire_shadows_darken_the_ground_but_stay_unlabelled():
+    from perception.training.synthetic import draw_shadows, shadow_points
+
+    sun = np.array([0.0, 0.6, 0.8])  # sunlight travelling east and down
+    points = np.array([[5.0, 0.0, -8.0]])
+    np.testing.assert_allclose(shadow_points(points, sun), [[5.0, 6.0, 0.0]])
+    # an east-west wire 10 m up, 2 m north; its shadow falls 7.5 m further north (sun 53 deg
+    # high from the south): 28 px from the image centre against the wire's 9 px
+    cam = aerial_camera(pitch_deg=-89.0, altitude_m=30.0)
+    y = np.linspace(-60, 60, 200)
+    wire = np.stack([np.full_like(y, 2.0), y, np.full_like(y, -10.0)], 1)
+    bundle = WireBundle((wire,), 0.05, 1.0, "dark")
+    ground = np.full((120, 160, 3), 0.7, np.float32)
+    shaded = ground.copy()
+    sun = np.array([np.cos(0.93), 0.0, np.sin(0.93)])  # travelling north, 53 deg high
+    draw_shadows(shaded, np.ones((120, 160), bool), [bundle], cam, sun, 0.6, 4)
+    darker = ground.mean(axis=2) - shaded.mean(axis=2) > 0.01
+    assert darker.any(axis=0).mean() > 0.9  # a faint shadow line across the image
+    _, mask, _ = composite_wires(np.random.default_rng(1), shaded, [bundle], cam, SyntheticParams())
+    assert mask.any(axis=0).mean() > 0.9 and (mask > 0)[darker].mean() < 0.05

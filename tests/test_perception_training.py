@@ -15,10 +15,8 @@ from perception.checkpoint import (
     warm_start,
 )
 from perception.inputs import network_input
-from perception.losses import class_balance_weights, class_balanced_cross_entropy
 from perception.params import DEFAULT_MODEL, FAST_MODEL, SyntheticParams, TrainingParams
-from perception.synthetic import synthetic_sample
-from perception.training import (
+from perception.training.loop import (
     HELD_OUT_SEED,
     evaluate_model,
     lr_factor,
@@ -26,6 +24,8 @@ from perception.training import (
     step_indices,
     train,
 )
+from perception.training.losses import class_balance_weights, class_balanced_cross_entropy
+from perception.training.synthetic import synthetic_sample
 from perception.zoo import build_model
 
 EASY = SyntheticParams(
@@ -144,8 +144,6 @@ def test_warm_start_moves_weights_across_a_pooling_layer(tmp_path):
     assert not skipped.skip.weight.any()  # a skip the checkpoint lacks stays zero
     with pytest.raises(ValueError, match="weights"):
         warm_start(build_model("k16-k32-d1-d2-k2"), tmp_path / "flat.pt", "rgb")
-    with pytest.raises(ValueError, match="rgb input"):
-        warm_start(build_model("k16-k16-d1-d2-k2", 5), tmp_path / "flat.pt", "rgble")
     params = tiny_params(model="k16-k16-p2-d1-d2-k2", steps=2, init_from=str(tmp_path / "flat.pt"))
     train(params, tmp_path / "tuned.pt", progress=False, synthetic=EASY)
     tuned = read_checkpoint(tmp_path / "tuned.pt")["state_dict"]["body.0.weight"]
@@ -198,7 +196,7 @@ def test_shipped_model_finds_held_out_synthetic_wires(arch):
 
 
 def test_grid_search_writes_a_table(tmp_path):
-    from perception.grid_search import run_grid_search
+    from perception.training.grid_search import run_grid_search
 
     rows = run_grid_search(
         ["f6c1", "k8-d2-k2"],
@@ -258,3 +256,20 @@ def test_train_command_records_the_loss_schedule_and_photo_settings(tmp_path):
     assert training["synthetic"]["photo_probability"] == 0.0
     assert training["synthetic"]["contrast_min"] == 0.04
     assert json.loads(metrics_path(out).read_text())["training"]["step"] == 2
+
+
+def test_rgble_model_warm_started_from_rgb_weights_starts_as_the_rgb_model(tmp_path):
+    from perception.checkpoint import warm_start
+
+    torch.manual_seed(0)
+    rgb = build_model("k32-p2-d2-k2", 3).eval()
+    path = save_checkpoint(tmp_path / "rgb.pt", rgb, "k32-p2-d2-k2", "rgb")
+    rgble = warm_start(build_model("k32-p2-d2-k2", 5), path, "rgble").eval()
+    image = synthetic_sample(3, 0, 48, 64)[0]
+    with torch.no_grad():
+        a = rgb(torch.from_numpy(network_input(image, "rgb"))[None])
+        b = rgble(torch.from_numpy(network_input(image, "rgble"))[None])
+    torch.testing.assert_close(a, b)
+    save_checkpoint(tmp_path / "le.pt", rgble, "k32-p2-d2-k2", "rgble")
+    with pytest.raises(ValueError, match="takes rgble input"):  # no way back to RGB
+        warm_start(build_model("k32-p2-d2-k2", 3), tmp_path / "le.pt", "rgb")

@@ -1,9 +1,11 @@
 """Planner + tracker + the SIL multirotor in lockstep on simulated time, through a scenario.
 
-Planner at 10 Hz, setpoints at 20 Hz, `hil.multirotor.Multirotor` (PX4-like cascaded
-controller and rigid body) integrating between them. Collisions are judged on the ground
-truth geometry; the tracking error is the distance between the vehicle and the reference
-sampled at the same time.
+Planner at 10 Hz, setpoints at 20 Hz, `hil.vehicle.multirotor.Multirotor` (PX4's controllers
+on SIH's rigid body) integrating between them. The planner flies the vehicle's own limits
+(`companion.link.px4_limits` on its PX4 parameters) and sends TRAJECTORY setpoints (position +
+velocity feed-forward, PX4's trajectory_setpoint), as the flight process does. Collisions are
+judged on the ground truth geometry; the tracking error is the distance between the vehicle
+and the reference sampled at the same time.
 """
 
 from dataclasses import dataclass
@@ -11,8 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from hil.multirotor import Multirotor
-from hil.params import VehicleSimParams
+from companion.link.px4_limits import vehicle_limits
+from hil.vehicle.multirotor import Multirotor
+from hil.vehicle.params import VehicleSimParams, px4_parameter_table
+from hil.vehicle.px4_controller import TrajectorySetpoint
 from planning.library import generate_library
 from planning.params import PlanningParams
 from planning.planner import LocalPlanner
@@ -20,7 +24,11 @@ from planning.synthetic_occupancy import SyntheticOccupancyMap, wall, wire_acros
 from planning.tracker import PathTracker, sample_reference
 from planning.types import PlannerState, SetpointKind, VehicleState
 
-PARAMS = PlanningParams()
+VEHICLE = VehicleSimParams()
+PX4_VALUES = {name: getattr(VEHICLE, field) for name, field in px4_parameter_table().items()}
+PARAMS = PlanningParams().model_copy(
+    update=vehicle_limits(PX4_VALUES, PlanningParams().max_speed_mps).planning_overrides()
+)
 LIBRARY = generate_library(PARAMS)
 START = np.array([0.0, 0.0, -3.0])
 GOAL = np.array([18.0, 0.0, -3.0])
@@ -37,7 +45,7 @@ class LoopFlight:
 
 
 def fly(world: SyntheticOccupancyMap, duration_s: float = 40.0) -> LoopFlight:
-    vehicle = Multirotor(VehicleSimParams(), seed=0)
+    vehicle = Multirotor(VEHICLE, seed=0)
     vehicle.reset(START, 0.0)
     planner, tracker = LocalPlanner(PARAMS, LIBRARY), PathTracker(PARAMS)
     planner.set_goal(GOAL, 0.0)
@@ -62,6 +70,18 @@ def fly(world: SyntheticOccupancyMap, duration_s: float = 40.0) -> LoopFlight:
             if setpoint.kind is SetpointKind.POSITION:
                 vehicle.set_position_setpoint(setpoint.position_ned_m, setpoint.yaw_rad)
                 last_velocity = None
+            elif setpoint.position_ned_m is not None:  # TRAJECTORY, or a BRAKE along its stop
+                vehicle.set_setpoint(
+                    TrajectorySetpoint(
+                        position_ned_m=setpoint.position_ned_m.copy(),
+                        velocity_ned_mps=setpoint.velocity_ned_mps.copy(),
+                        acceleration_ned_mps2=setpoint.acceleration_ned_mps2.copy(),
+                        yaw_rad=setpoint.yaw_rad,
+                    )
+                )
+                if last_velocity is not None:
+                    changes.append(np.linalg.norm(setpoint.velocity_ned_mps - last_velocity))
+                last_velocity = setpoint.velocity_ned_mps
             else:
                 vehicle.set_velocity_setpoint(setpoint.velocity_ned_mps, setpoint.yaw_rad)
                 if last_velocity is not None:
@@ -97,7 +117,10 @@ def test_the_sil_vehicle_flies_to_the_goal_around_the_obstacle(world) -> None:
     assert not truth.occupied(flight.path).any()
     tracking = flight.tracking_error_m[np.isfinite(flight.tracking_error_m)]
     assert len(tracking) > 100
-    assert tracking.max() < 0.2  # m (measured 0.05: feed-forward + P correction)
+    # m, measured 0.02 median: position, velocity and acceleration fed forward to PX4's
+    # position loop; 0.27-0.58 at most where a brake or the final approach takes over
+    # (velocity setpoints alone trailed an accelerating plan by metres)
+    assert tracking.max() < 0.7
     assert np.median(tracking) < 0.05
     # no setpoint jumps at 20 Hz, replans included
     limit = PARAMS.setpoint_accel_slack * PARAMS.max_accel_mps2 * SETPOINT_DT_S

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.cli_planning import load_library, plot_library, save_library
+from companion.cli.planning import load_library, plot_library, save_library
 from planning.library import TrajectoryLibrary, generate_library
 from planning.params import PlanningParams
 

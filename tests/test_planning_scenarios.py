@@ -5,24 +5,26 @@ the map sees only what the vehicle's camera looked at (`SyntheticOccupancyMap` v
 unknown space is really unknown. Collisions are judged on the ground-truth geometry.
 """
 
+import itertools
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from kinematic import flown_velocity
 
+from geometry.shapes import Box
 from planning.library import generate_library
 from planning.params import PlanningParams
 from planning.planner import LocalPlanner
 from planning.synthetic_occupancy import (
-    Box,
     SyntheticOccupancyMap,
     box_canyon,
     corridor,
     wall,
     wire_across,
 )
-from planning.tracker import PathTracker
+from planning.tracker import PathTracker, sample_reference
 from planning.types import PlannerOutput, PlannerState, Setpoint, SetpointKind, VehicleState
 
 PARAMS = PlanningParams()
@@ -71,10 +73,7 @@ def fly(
             vehicle = VehicleState(now_s, position, velocity, yaw)
             setpoint = tracker.setpoint(now_s, vehicle, output.reference, goal)
             setpoints.append(setpoint)
-            if setpoint.kind is SetpointKind.POSITION:
-                velocity = np.clip(setpoint.position_ned_m - position, -1.0, 1.0)
-            else:
-                velocity = setpoint.velocity_ned_mps
+            velocity = flown_velocity(setpoint, position)
             position = position + SETPOINT_DT_S * velocity
             yaw = setpoint.yaw_rad
             now_s += SETPOINT_DT_S
@@ -255,3 +254,32 @@ def test_no_progress_for_the_stuck_timeout_starts_a_rewind() -> None:
     np.testing.assert_allclose(back[0], position)
     assert back[-1][0] == pytest.approx(position[0] - PARAMS.rewind_distance_m, abs=0.5)
     np.testing.assert_allclose(back[:, 1:], np.tile(START[1:], (len(back), 1)))
+
+
+def test_a_hold_mid_turn_brakes_along_the_turn_that_was_checked_free() -> None:
+    """The stop follows the chosen trajectory's path (checked free, its braking distance
+    included), not a straight line along the velocity into unchecked space."""
+    planner = LocalPlanner(PARAMS, LIBRARY)
+    planner.set_goal(np.array([6.0, 12.0, -3.0]), 0.0)  # far to the right of the nose
+    world = SyntheticOccupancyMap(omniscient=True)
+    velocity = np.array([2.0, 0.0, 0.0])
+    turning = planner.step(0.0, VehicleState(0.0, START, velocity, 0.0), velocity, world)
+    assert turning.state is PlannerState.TRACKING and turning.label.startswith("right")
+    position, velocity = sample_reference(turning.reference, 0.1)
+    held = planner.stop(0.1, VehicleState(0.1, position, velocity, 0.0), velocity)
+    stop = held.reference
+    assert held.state is PlannerState.BRAKING and stop.brake
+    # on the turn: every point of the stop within a few cm of the turn's own path
+    turn = turning.reference.positions_ned_m
+    dense = np.concatenate([np.linspace(a, b, 20) for a, b in itertools.pairwise(turn)])
+    gaps = np.min(np.linalg.norm(stop.positions_ned_m[:, None] - dense[None], axis=-1), axis=1)
+    assert gaps.max() < 0.05
+    # and it curves: its end is off the straight line along the velocity it started with
+    offset = stop.positions_ned_m[-1] - stop.positions_ned_m[0]
+    along = velocity / np.linalg.norm(velocity)
+    assert np.linalg.norm(offset - (offset @ along) * along) > 0.05
+    # stopped at max deceleration: v^2 / 2a along the path, ending at rest
+    length = np.sum(np.linalg.norm(np.diff(stop.positions_ned_m, axis=0), axis=1))
+    speed = float(np.linalg.norm(velocity))
+    assert length == pytest.approx(speed**2 / (2 * PARAMS.max_accel_mps2), rel=0.05)
+    np.testing.assert_allclose(stop.velocities_ned_mps[-1], 0.0)

@@ -157,9 +157,43 @@ def test_the_unknown_space_policy_changes_the_choice() -> None:
     )
     chosen = select(PointMap(seen_fn=near_only), params)
     assert chosen.cost[C] == pytest.approx((4.0 + 0.5 * np.pi / 2) / 2 + 3.0 * 2 / 3)
-    # cost policy: unseen space within the braking distance is a collision, not a cost
+    # cost policy: unseen space within the braking distance is a collision, not a cost; only
+    # the stop, which stays inside the vehicle's own volume, needs no observation
     blind = PointMap(seen_fn=lambda pts: np.zeros(len(pts), bool))
-    assert select(blind, params.model_copy(update={"safety_margin_m": 5.0})).index is None
+    assert select(blind, params.model_copy(update={"safety_margin_m": 5.0})).index == STOP
+    # ... unless even the vehicle's own volume is taken as unknown
+    no_volume = params.model_copy(update={"safety_margin_m": 5.0, "own_volume_m": 0.0})
+    assert select(blind, no_volume).index is None
+
+
+def test_the_vehicles_own_volume_needs_no_observation() -> None:
+    # unseen only within 1 m of the start (closer than any camera sees): the straight A is
+    # flown once those points lie inside the vehicle's own volume, refused otherwise
+    # (C, cheaper, is blocked at its first waypoint)
+    near_blind = PointMap(
+        centres=[POSITIONS[C, 0]], seen_fn=lambda pts: np.linalg.norm(pts - ORIGIN, axis=1) > 1.01
+    )
+    params = PARAMS.model_copy(
+        update={"unknown_policy": UnknownPolicy.COST, "safety_margin_m": 2.0, "check_chunk_size": 4}
+    )
+    assert select(near_blind, params.model_copy(update={"own_volume_m": 1.02})).index == A
+    assert select(near_blind, params.model_copy(update={"own_volume_m": 0.0})).index is None
+
+
+def test_the_own_volume_stays_where_a_recovering_vehicle_stopped() -> None:
+    # anchored 1 m behind the start, the volume no longer covers the unseen first metre: a
+    # vehicle creeping on in recovery cannot carry its exemption into space nobody has seen
+    line = np.zeros((1, 8, 3))
+    line[0, :, 0] = np.arange(0.25, 2.25, 0.25)
+    speed = np.zeros((1, 8, 3))
+    speed[0, :, 0] = 1.0
+    volume = PARAMS.model_copy(update={"own_volume_m": 0.6})
+    _, near = checked_waypoints(line, speed, np.zeros(3), np.array([7]), volume)
+    _, anchored = checked_waypoints(
+        line, speed, np.zeros(3), np.array([7]), volume, np.array([-1.0, 0.0, 0.0])
+    )
+    assert not near[0, :2].any()  # 0.25 and 0.5 m: inside the vehicle
+    assert anchored[0, :2].all()  # 1.25 and 1.5 m from where it stopped: must be seen
 
 
 def test_braking_distance_and_safety_margin_extend_the_checked_path() -> None:
@@ -207,3 +241,31 @@ def test_hysteresis_and_descent_cost_shift_the_ranking() -> None:
         STOP,
     )
     assert chosen.index == A
+
+
+def test_descent_costs_only_below_the_start_and_the_goal() -> None:
+    # two ways forward: level, and descending 2 m; the descent costs extra with the goal at
+    # the start's altitude (wires are passed over), nothing with the goal 2 m below
+    level = np.array([[1.0, 0, 0], [2, 0, 0], [3, 0, 0]])
+    down = level + np.array([[0, 0, 0.7], [0, 0, 1.4], [0, 0, 2.0]])
+    positions = np.stack([level, down, np.zeros((3, 3))]) + ORIGIN
+    velocities = np.zeros_like(positions)
+    velocities[:2, :, 0] = 1.0
+    params = PARAMS.model_copy(update={"descent_cost_per_m": 0.3, "alpha": 1.0})
+    free = PointMap()
+    costs = {}
+    for name, goal in (("level", GOAL), ("below", GOAL + np.array([0.0, 0.0, 2.0]))):
+        plain = select_trajectory(
+            positions,
+            velocities,
+            ORIGIN,
+            goal,
+            FORWARD,
+            free,
+            PARAMS.model_copy(update={"alpha": 1.0}),
+            2,
+        )
+        priced = select_trajectory(positions, velocities, ORIGIN, goal, FORWARD, free, params, 2)
+        costs[name] = priced.cost[:2] - plain.cost[:2]
+    np.testing.assert_allclose(costs["level"], [0.0, 0.3 * 2.0])
+    np.testing.assert_allclose(costs["below"], [0.0, 0.0])

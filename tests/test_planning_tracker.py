@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+from kinematic import flown_velocity
 
-from planning.params import PlanningParams, YawPolicy
+from geometry.rotation import wrap_angle_rad
+from planning.params import PlanningParams, SetpointMode, YawPolicy
 from planning.synthetic_occupancy import SyntheticOccupancyMap, wall
-from planning.tracker import PathTracker, sample_reference, wrap_angle_rad
+from planning.tracker import PathTracker, sample_reference
 from planning.types import Reference, SetpointKind, VehicleState
 
 PARAMS = PlanningParams()
@@ -30,7 +32,7 @@ def run(tracker: PathTracker, references, seconds: float, goal=None, start_yaw: 
             now_s, VehicleState(now_s, position, velocity, yaw), references(now_s), goal
         )
         setpoints.append(setpoint)
-        velocity = setpoint.velocity_ned_mps
+        velocity = flown_velocity(setpoint, position)
         position = position + DT_S * velocity
         yaw = setpoint.yaw_rad
     return setpoints
@@ -46,8 +48,11 @@ def test_sample_reference_interpolates_and_clamps() -> None:
     assert wrap_angle_rad(3 * np.pi / 2) == pytest.approx(-np.pi / 2)
 
 
-def test_replanning_to_a_very_different_trajectory_does_not_jump_the_setpoint() -> None:
-    tracker = PathTracker(PARAMS)
+@pytest.mark.parametrize("mode", list(SetpointMode))
+def test_replanning_to_a_very_different_trajectory_does_not_jump_the_setpoint(
+    mode: SetpointMode,
+) -> None:
+    tracker = PathTracker(PARAMS.model_copy(update={"setpoint_mode": mode}))
     north = straight(0.0, [0, 0, 0], [2.0, 0, 0], 1)
 
     def references(now_s: float) -> Reference:
@@ -65,7 +70,12 @@ def test_replanning_to_a_very_different_trajectory_does_not_jump_the_setpoint() 
     before = velocities[round(2.0 / DT_S) - 1]
     assert np.linalg.norm(before - [2.0, 0, 0]) < 0.3  # tracking the first plan (+ catch-up)
     assert steps[round(2.0 / DT_S) - 1] <= MAX_STEP_MPS + 1e-9  # the switch itself is smooth
-    assert all(s.kind is SetpointKind.VELOCITY and s.valid for s in setpoints)
+    kind = SetpointKind(mode.value)
+    assert all(s.kind is kind and s.valid for s in setpoints)
+    if mode is SetpointMode.TRAJECTORY:  # the position sent moves no faster than the plans
+        positions = np.array([s.position_ned_m for s in setpoints])
+        jumps = np.linalg.norm(np.diff(positions, axis=0), axis=1)
+        assert jumps.max() < 3.0 * DT_S
 
 
 def test_setpoints_stay_smooth_through_the_replans_of_a_planned_flight() -> None:

@@ -20,16 +20,18 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from companion import cli_service
-from companion.config import LinkParams, Settings
-from companion.demo_flight import free_udp_port
+from companion.cli import service as cli_service
+from companion.cli.demo_flight import free_udp_port
+from companion.config import Settings
+from companion.ingest.params import CameraParams
+from companion.link.params import LinkParams
+from companion.link.telemetry import FlightMode, Health, LandedState, TelemetryCache
+from companion.link.vehicle_link import LinkState
 from companion.service import ReadinessWatch, run_service, status_line
 from companion.service_params import ServiceParams
 from companion.systemd_notify import SystemdNotifier, watchdog_interval_s
-from companion.telemetry import FlightMode, Health, LandedState, TelemetryCache
-from companion.vehicle_link import LinkState
-from hil.params import VehicleSimParams
-from hil.vehicle_server import VehicleServer
+from hil.mavlink.server import VehicleServer
+from hil.vehicle.params import VehicleSimParams
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -96,7 +98,8 @@ def _settings(port: int, connect_timeout_s: float = 5.0) -> Settings:
     return Settings(
         link=LinkParams(
             connection_url=f"udpin://0.0.0.0:{port}", connect_timeout_s=connect_timeout_s
-        )
+        ),
+        camera=CameraParams(source="none"),
     )
 
 
@@ -292,13 +295,17 @@ async def test_a_stalled_loop_does_not_feed_the_watchdog(listener: NotifyListene
 async def test_service_waits_for_a_vehicle_that_boots_later(listener: NotifyListener) -> None:
     port = free_udp_port()
     task = asyncio.create_task(run_service(_settings(port, connect_timeout_s=0.5), FAST))
-    await _until(
-        lambda: len(listener.with_key("EXTEND_TIMEOUT_USEC")) >= 2, 10.0, "a second attempt"
-    )
+
+    def attempts() -> list[dict[str, str]]:
+        extended = listener.with_key("EXTEND_TIMEOUT_USEC")
+        return [m for m in extended if "waiting for an autopilot" in m["STATUS"]]
+
+    await _until(lambda: len(attempts()) >= 2, 10.0, "a second attempt")
     assert not listener.with_key("READY")
-    assert "(attempt 2)" in listener.with_key("EXTEND_TIMEOUT_USEC")[1]["STATUS"]
+    assert "loading the wire CNN" in listener.messages[0]["STATUS"]  # before any attempt
+    assert "(attempt 2)" in attempts()[1]["STATUS"]
     # Each attempt asks systemd for its own duration plus the pause and the grace time.
-    assert int(listener.messages[0]["EXTEND_TIMEOUT_USEC"]) == round((0.5 + 0.2 + 10.0) * 1e6)
+    assert int(attempts()[0]["EXTEND_TIMEOUT_USEC"]) == round((0.5 + 0.2 + 10.0) * 1e6)
     with _vehicle(port) as server:
         await _until(lambda: bool(listener.with_key("READY")), 15.0, "READY=1 once PX4 is up")
         task.cancel()
@@ -352,7 +359,9 @@ def test_cli_run_with_config_stops_on_sigint(listener: NotifyListener, tmp_path:
     cli_service.register(app, typer.Typer())
     port = free_udp_port()
     config = tmp_path / "wireavoid.toml"
-    config.write_text(f'[link]\nconnection_url = "udpin://0.0.0.0:{port}"\n')
+    config.write_text(
+        f'[link]\nconnection_url = "udpin://0.0.0.0:{port}"\n[camera]\nsource = "none"\n'
+    )
 
     def interrupt_once_ready() -> None:
         end = time.monotonic() + 20.0
@@ -380,7 +389,7 @@ def test_cli_run_with_config_stops_on_sigint(listener: NotifyListener, tmp_path:
 REPO = Path(__file__).resolve().parents[1]
 
 _RUN_APP = (
-    "import typer; from companion import cli_service; app = typer.Typer(); "
+    "import typer; from companion.cli import service as cli_service; app = typer.Typer(); "
     "app.callback()(lambda: None); cli_service.register(app, typer.Typer()); app()"
 )
 
@@ -393,7 +402,9 @@ def test_process_under_a_journal_stream_stops_on_sigterm(tmp_path: Path) -> None
     notify = NotifyListener(str(tmp_path / "notify"))
     port = free_udp_port()
     config = tmp_path / "wireavoid.toml"
-    config.write_text(f'[link]\nconnection_url = "udpin://0.0.0.0:{port}"\n')
+    config.write_text(
+        f'[link]\nconnection_url = "udpin://0.0.0.0:{port}"\n[camera]\nsource = "none"\n'
+    )
     read_fd, write_fd = os.pipe()
     stat = os.fstat(write_fd)
     env = dict(
@@ -427,7 +438,7 @@ def test_process_under_a_journal_stream_stops_on_sigterm(tmp_path: Path) -> None
     finally:
         notify.close()
     # Journal format: a syslog priority prefix, no timestamp of our own.
-    assert f"<6>companion.service: link up on udpin://0.0.0.0:{port}; supervising" in journal
+    assert f"<6>companion.service: link up on udpin://0.0.0.0:{port}; flying" in journal
     assert "<6>companion.service: SIGTERM received: stopping" in journal
     assert all(line.startswith("<") for line in journal), journal
 
@@ -436,10 +447,14 @@ def test_process_under_a_journal_stream_stops_on_sigterm(tmp_path: Path) -> None
 
 
 def _unit_values(path: Path) -> dict[str, str]:
-    """`Key=Value` lines of a systemd unit (this unit sets no key twice)."""
+    """`Key=Value` lines of a systemd unit; a key set on several lines (DeviceAllow) has its
+    values joined by newlines."""
     lines = [line.strip() for line in path.read_text().splitlines()]
     pairs = [line.split("=", 1) for line in lines if "=" in line and not line.startswith("#")]
-    return {key: value for key, value in pairs}
+    values: dict[str, str] = {}
+    for key, value in pairs:
+        values[key] = f"{values[key]}\n{value}" if key in values else value
+    return values
 
 
 def test_unit_file_matches_the_service_it_starts() -> None:
@@ -451,7 +466,10 @@ def test_unit_file_matches_the_service_it_starts() -> None:
     )
     assert "dialout" in unit["SupplementaryGroups"].split()
     assert {"AF_INET", "AF_UNIX"} <= set(unit["RestrictAddressFamilies"].split())
-    assert "PrivateDevices" not in unit and "ProtectClock" not in unit  # would hide the UART
+    # the UART to PX4 and the camera stay reachable under the closed device policy
+    assert "PrivateDevices" not in unit and unit["DevicePolicy"] == "closed"
+    allowed = unit["DeviceAllow"].splitlines()
+    assert "char-ttyTHS rw" in allowed and "char-usb_device rw" in allowed
     # /opt is read-only: numba must cache the query kernel in the unit's own cache directory
     assert unit["ProtectSystem"] == "strict" and "MemoryDenyWriteExecute" not in unit
     environment = dict(item.split("=", 1) for item in unit["Environment"].split())

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from companion.cli import app
-from hil.vehicle_server import mavlink, mavutil
+from hil.mavlink.server import mavlink, mavutil
 
 
 def free_udp_port() -> int:

@@ -1,4 +1,9 @@
-"""The SIL multirotor's dynamics and PX4-like cascaded controller, on simulated time."""
+"""The SIL multirotor's dynamics and PX4's cascaded controllers, on simulated time.
+
+Controller semantics (limits, convergence, NaN axes) are checked on `low_drag_1500g`, where
+PX4's velocity PID settles in seconds; on the default SIH airframe its strong drag (SIH_KDV 1.0)
+makes PX4's integrator take tens of seconds, as PX4 SITL itself does (tests/test_px4_*.py).
+"""
 
 from __future__ import annotations
 
@@ -7,19 +12,22 @@ import math
 import numpy as np
 import pytest
 
-from hil.attitude import (
+from geometry.rotation import (
     euler_from_quaternion,
     quaternion_from_euler,
+    quaternion_from_rotation,
+    rotation_from_quaternion,
 )
-from hil.multirotor import Multirotor, VehicleState
-from hil.params import VehicleSimParams
-from hil.px4_controller import GRAVITY_MPS2, PositionController, TrajectorySetpoint
-from mapping.pose import quaternion_from_rotation, rotation_from_quaternion
+from hil.vehicle.airframes import airframe_params
+from hil.vehicle.multirotor import Multirotor, RigidBodyState
+from hil.vehicle.params import VehicleSimParams
+from hil.vehicle.px4_controller import GRAVITY_MPS2, PositionController, TrajectorySetpoint
 
 DT_S = 0.02
+LOW_DRAG = airframe_params("low_drag_1500g")
 
 
-def fly(vehicle: Multirotor, duration_s: float) -> list[VehicleState]:
+def fly(vehicle: Multirotor, duration_s: float) -> list[RigidBodyState]:
     """States every DT_S for `duration_s`."""
     return [vehicle.step(DT_S) for _ in range(round(duration_s / DT_S))]
 
@@ -45,11 +53,11 @@ def test_hover_holds_position_and_level_attitude() -> None:
     final = states[-1]
     np.testing.assert_allclose(final.position_ned_m, [0.0, 0.0, -10.0], atol=0.02)
     assert final.tilt_rad < 1e-3
-    assert final.thrust_n == pytest.approx(1.5 * GRAVITY_MPS2, rel=0.01)
+    assert final.thrust_n == pytest.approx(vehicle.params.mass_kg * GRAVITY_MPS2, rel=0.01)
 
 
 def test_velocity_step_is_bounded_and_converges() -> None:
-    params = VehicleSimParams()
+    params = LOW_DRAG
     vehicle = airborne(params)
     vehicle.set_velocity_setpoint(np.array([5.0, 0.0, 0.0]), yaw_rad=0.0)
     states = fly(vehicle, 12.0)
@@ -60,7 +68,8 @@ def test_velocity_step_is_bounded_and_converges() -> None:
     # no teleporting: steps between samples bounded by the speed limit
     assert np.max(np.linalg.norm(np.diff(positions, axis=0), axis=1)) <= 5.5 * DT_S
     assert speeds.max() < 5.5
-    assert accels.max() < params.acc_hor_max_mps2 * 1.3
+    # PX4 does not smooth offboard setpoints: the step is bounded by the tilt limit alone
+    assert accels.max() < GRAVITY_MPS2 * math.tan(math.radians(params.tilt_max_air_deg))
     assert np.degrees(tilts.max()) < params.tilt_max_air_deg
     # the first 0.5 s cannot reach the target (acceleration limited)
     assert states[round(0.5 / DT_S)].velocity_ned_mps[0] < 0.6 * 5.0
@@ -69,7 +78,9 @@ def test_velocity_step_is_bounded_and_converges() -> None:
 
 
 def test_velocity_limits_clip_commands() -> None:
-    params = VehicleSimParams(xy_vel_max_mps=4.0, z_vel_max_up_mps=2.0, z_vel_max_dn_mps=1.0)
+    params = LOW_DRAG.model_copy(
+        update={"xy_vel_max_mps": 4.0, "z_vel_max_up_mps": 2.0, "z_vel_max_dn_mps": 1.0}
+    )
     controller = PositionController(params)
     up = controller.velocity_setpoint(
         TrajectorySetpoint(velocity_ned_mps=np.array([10.0, 10.0, -10.0])), np.zeros(3)
@@ -85,8 +96,9 @@ def test_velocity_limits_clip_commands() -> None:
     states = fly(vehicle, 10.0)
     horizontal = [np.hypot(*s.velocity_ned_mps[:2]) for s in states]
     climbs = [-s.velocity_ned_mps[2] for s in states]
-    # the flown velocity overshoots the clipped setpoint by a tracking margin only
-    assert max(horizontal) < 4.0 * 1.05
+    # the flown velocity overshoots the clipped setpoint by a tracking margin only (PX4's
+    # velocity integrator overshoots a step by ~6% on a light-drag airframe: 8% allowed)
+    assert max(horizontal) < 4.0 * 1.08
     assert horizontal[-1] == pytest.approx(4.0, abs=0.15)
     assert max(climbs) < 2.0 * 1.15
     assert climbs[-1] == pytest.approx(2.0, abs=0.05)
@@ -132,7 +144,7 @@ def test_position_setpoint_converges_without_large_overshoot() -> None:
 
 
 def test_nan_axes_are_not_controlled_by_that_term() -> None:
-    vehicle = airborne()
+    vehicle = airborne(LOW_DRAG)
     # velocity north, position altitude, east uncontrolled by position (PX4 NaN semantics)
     vehicle.set_setpoint(
         TrajectorySetpoint(

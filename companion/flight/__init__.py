@@ -1,0 +1,1 @@
+"""The closed loop in one process: camera -> wire CNN -> DROAN -> planner -> setpoints."""

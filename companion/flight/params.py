@@ -1,0 +1,70 @@
+"""Tunables of the closed loop (`companion.flight.process`), composed into `Settings.flight`."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class FlightParams(BaseModel):
+    """The closed loop: staleness limits, loop rates and reporting."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    perception_max_age_s: float = Field(
+        0.5,
+        gt=0.0,
+        le=5.0,
+        description="the newest frame fused into the map may be this old; older, perception is "
+        "stale and the vehicle brakes and holds (thesis 4.4: the map needs fresh frames), s",
+    )
+    planner_max_age_s: float = Field(
+        0.4,
+        gt=0.0,
+        le=5.0,
+        description="a plan older than this is stale: the tracker sends an invalid brake, which "
+        "the link turns into brake-then-Hold (the link's own limit on setpoints stays), s",
+    )
+    pose_jump_m: float = Field(
+        1.0,
+        gt=0.0,
+        le=100.0,
+        description="a local position this far from where the previous one predicts it (at its "
+        "velocity) is an estimator reset: the map, built in the old frame, is rebuilt and the "
+        "vehicle holds until it is fresh again, m",
+    )
+    pose_jump_hold_s: float = Field(
+        1.0,
+        ge=0.0,
+        le=30.0,
+        description="after a jump of the local position, perception counts as stale (the "
+        "vehicle brakes and holds) for at least this long while the map is rebuilt from new "
+        "frames, s",
+    )
+    pose_jump_max_gap_s: float = Field(
+        0.5,
+        gt=0.0,
+        le=10.0,
+        description="positions further apart than this are not checked for a jump (after a gap "
+        "the vehicle may have flown anywhere), s",
+    )
+    camera_timeout_s: float = Field(
+        2.0,
+        gt=0.0,
+        le=60.0,
+        description="no frame from the camera for this long is reported as a dead camera, s",
+    )
+    camera_retry_s: float = Field(
+        1.0, gt=0.0, le=60.0, description="pause before reopening a camera that failed, s"
+    )
+    mission_rate_hz: float = Field(
+        10.0, ge=1.0, le=50.0, description="rate the mission manager is stepped at, Hz"
+    )
+    status_period_s: float = Field(
+        5.0,
+        gt=0.0,
+        le=3600.0,
+        description="the stage timings (p50/p99 latency, dropped frames) are logged this often, s",
+    )
+    timing_window: int = Field(
+        2000, ge=10, le=1_000_000, description="latency samples per stage kept for p50/p99"
+    )

@@ -1,0 +1,1 @@
+"""Simulated cameras rendering the world from the vehicle's true pose."""

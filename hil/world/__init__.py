@@ -1,0 +1,1 @@
+"""The simulated 3D world: ground, obstacles and wires."""

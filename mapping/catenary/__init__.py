@@ -1,0 +1,1 @@
+"""Multi-view catenary reconstruction of wires (thesis ch. 3)."""

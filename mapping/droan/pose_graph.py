@@ -1,0 +1,243 @@
+"""DROAN: a pose graph of expanded disparity images answering batched collision queries
+(thesis 4.4.6 with 4.4.3-4.4.5). Implements `mapping.query.OccupancyMap`.
+
+Each node holds the camera pose `world_from_camera` (NED from camera frame, see
+`geometry.pose`), the image timestamp, and six expanded images on the expansion grid (stereo
+front/back and own-return front/back, wire front/back; see `mapping.droan.expansion`). Node images
+live in one preallocated `(max_nodes, Hc, Wc, 6) float32` array, so a query projects all
+points into each node and costs it in one compiled pass (`mapping.droan.occupancy.summed_costs`); a
+large batch is split across `query_threads` threads (the kernel releases the GIL), each
+point's answer unchanged.
+
+Keyframes (4.4.6, 3.4.2): a frame becomes a new node when the camera moved at least
+`keyframe_translation_m` or turned at least `keyframe_rotation_deg` since the newest keyframe;
+otherwise it replaces the newest node if that one is a non-keyframe "live" node (or becomes
+that live node), so the latest observation is always fused exactly once
+(`replace_latest_non_keyframe`; when False it is dropped). The oldest node is evicted when the
+graph is full; nodes older than `max_node_age_s` are evicted on `insert` / `prune`.
+"""
+
+from __future__ import annotations
+
+import functools
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from geometry.camera import StereoRig
+from geometry.keyframes import is_new_keyframe
+from geometry.pose import Pose
+from mapping.droan.expansion import DisparityExpander, ExpandedImage
+from mapping.droan.occupancy import summed_costs
+from mapping.droan.params import MappingParams
+from mapping.query import OccupancyQuery
+
+_MIN_DEPTH_M = 1e-3
+
+
+class InsertResult(Enum):
+    """What `DroanMap.insert` did with a frame."""
+
+    KEYFRAME = "keyframe"
+    LIVE = "live"
+    DROPPED = "dropped"
+
+
+@dataclass(frozen=True, slots=True)
+class DroanNode:
+    """Metadata of one pose-graph node (its images live in the map's node array)."""
+
+    stamp_s: float
+    world_from_camera: Pose
+    keyframe: bool
+    has_stereo: bool
+    has_wire: bool
+
+
+class DroanMap:
+    """Pose graph of expanded disparity images (4.4.6); `query` is the planner's hot path."""
+
+    def __init__(self, rig: StereoRig, params: MappingParams) -> None:
+        self.params = params
+        self.rig = rig
+        self.expander = DisparityExpander(rig, params)
+        self.grid_camera = self.expander.grid_camera
+        h, w = self.grid_camera.shape
+        n = params.max_nodes
+        # 8 channels (6 used): a pixel's 32-byte row never straddles a cache line
+        self._images = np.full((n * h * w, 8), -1.0, dtype=np.float32)
+        self._projection = np.zeros((n, 3, 3), dtype=np.float32)  # K_grid @ R_cw
+        self._offset = np.zeros((n, 3), dtype=np.float32)  # K_grid @ t_cw
+        self._slots: list[DroanNode | None] = [None] * n
+        self._order: list[int] = []  # occupied slots, oldest first
+        self._active = np.zeros(0, dtype=np.intp)
+        self._occupancy(np.zeros((0, 3)))  # compile (or load) the query kernel now, not in flight
+
+    # --- graph ---------------------------------------------------------------------------
+
+    @property
+    def nodes(self) -> list[DroanNode]:
+        """The nodes, oldest first."""
+        return [self._slots[i] for i in self._order]  # type: ignore[misc]
+
+    def __len__(self) -> int:
+        return len(self._order)
+
+    def clear(self) -> None:
+        """Forget every node."""
+        self._slots = [None] * len(self._slots)
+        self._order = []
+        self._active = np.zeros(0, dtype=np.intp)
+
+    def memory_bytes(self) -> int:
+        """Bytes held by node images and poses (preallocated for `max_nodes`)."""
+        return self._images.nbytes + self._projection.nbytes + self._offset.nbytes
+
+    def prune(self, now_s: float) -> None:
+        """Evict nodes older than `max_node_age_s` (when that limit is set)."""
+        if self.params.max_node_age_s <= 0:
+            return
+        oldest_s = now_s - self.params.max_node_age_s
+        self._order = [i for i in self._order if self._slots[i].stamp_s >= oldest_s]  # type: ignore[union-attr]
+        self._active = np.array(self._order, dtype=np.intp)
+
+    def _is_keyframe(self, world_from_camera: Pose) -> bool:
+        keyframes = [self._slots[i] for i in self._order if self._slots[i].keyframe]  # type: ignore[union-attr]
+        last = keyframes[-1].world_from_camera if keyframes else None  # type: ignore[union-attr]
+        return is_new_keyframe(
+            last,
+            world_from_camera,
+            self.params.keyframe_translation_m,
+            np.deg2rad(self.params.keyframe_rotation_deg),
+        )
+
+    def insert(
+        self,
+        stamp_s: float,
+        world_from_camera: Pose,
+        disparity_px: np.ndarray | None = None,
+        wire_mask: np.ndarray | None = None,
+    ) -> InsertResult:
+        """Fuse one frame taken at `stamp_s` (s) from `world_from_camera` (NED from camera).
+
+        disparity_px: `(H, W) float32` px (NaN invalid, 0 no return; `mapping.droan.expansion`), or
+            None when only a wire mask is available.
+        wire_mask: `(H, W) bool` wire pixels registered to the disparity camera, or None when
+            no wire detection ran for this frame (no wire evidence, not "no wire").
+        """
+        if disparity_px is None and wire_mask is None:
+            raise ValueError("a frame needs a disparity image, a wire mask or both")
+        self.prune(stamp_s)
+        keyframe = self._is_keyframe(world_from_camera)
+        newest = self._slots[self._order[-1]] if self._order else None
+        live_newest = newest is not None and not newest.keyframe
+        if not keyframe and not self.params.replace_latest_non_keyframe:
+            return InsertResult.DROPPED
+        if live_newest:
+            slot = self._order.pop()
+        elif len(self._order) < len(self._slots):
+            slot = min(set(range(len(self._slots))) - set(self._order))
+        else:
+            slot = self._order.pop(0)
+        self._write(slot, world_from_camera, disparity_px, wire_mask)
+        self._slots[slot] = DroanNode(
+            float(stamp_s),
+            world_from_camera,
+            keyframe,
+            disparity_px is not None,
+            wire_mask is not None,
+        )
+        self._order.append(slot)
+        self._active = np.array(self._order, dtype=np.intp)
+        return InsertResult.KEYFRAME if keyframe else InsertResult.LIVE
+
+    def _write(
+        self,
+        slot: int,
+        world_from_camera: Pose,
+        disparity_px: np.ndarray | None,
+        wire_mask: np.ndarray | None,
+    ) -> None:
+        images = self._node_view(slot)
+        images.fill(-1.0)
+        if disparity_px is not None:
+            stereo = self.expander.expand_stereo(disparity_px)
+            images[..., 0], images[..., 1] = stereo.front_px, stereo.back_px
+            images[..., 2], images[..., 3] = stereo.own_front_px, stereo.own_back_px
+        if wire_mask is not None:
+            wire = self.expander.expand_wire(wire_mask)
+            images[..., 4], images[..., 5] = wire.front_px, wire.back_px
+        camera_from_world = world_from_camera.inverse()
+        k = self.grid_camera.intrinsic_matrix()
+        self._projection[slot] = k @ camera_from_world.rotation
+        self._offset[slot] = k @ camera_from_world.translation_m
+
+    def _node_view(self, slot: int) -> np.ndarray:
+        h, w = self.grid_camera.shape
+        return self._images[slot * h * w : (slot + 1) * h * w].reshape(h, w, 8)
+
+    def node_images(self, index: int) -> tuple[ExpandedImage, ExpandedImage]:
+        """(stereo, wire) expanded images of the `index`-th node, oldest first."""
+        images = self._node_view(self._order[index])
+        return (
+            ExpandedImage(images[..., 0], images[..., 1], images[..., 2], images[..., 3]),
+            ExpandedImage(images[..., 4], images[..., 5]),
+        )
+
+    # --- queries ---------------------------------------------------------------------------
+
+    def query(self, points_ned_m: np.ndarray) -> OccupancyQuery:
+        """Batched collision check of `(N, 3)` NED world points (m) against all nodes (4.4.5).
+
+        occupancy: max(M_stereo, M_wire), each M = max(sum over nodes of occ, 0) (eq. 4.5)
+            with the stereo costs of Table 4.1 and the wire costs of the 4.4.5 note, summed
+            separately (stereo cannot see wires, so its free evidence must not erase them);
+        collision: occupancy >= gamma;
+        seen: some node observed the point directly: inside its image, in front of the camera,
+            within `max_range_m`, on a valid pixel and not occluded (behind its back limit);
+            only stereo observations make points seen (a wire mask alone says nothing of free
+            space).
+        """
+        points = np.asarray(points_ned_m, dtype=np.float32).reshape(-1, 3)
+        n = len(points)
+        if n == 0 or not self._order:
+            zeros = np.zeros(n, dtype=np.float32)
+            return OccupancyQuery(np.zeros(n, bool), zeros, np.zeros(n, bool))
+        threads = self.params.query_threads
+        if threads == 1 or n < self.params.query_split_min_points:
+            occupancy, seen = self._occupancy(points)
+        else:
+            parts = list(_pool(threads).map(self._occupancy, np.array_split(points, threads)))
+            occupancy = np.concatenate([part[0] for part in parts])
+            seen = np.concatenate([part[1] for part in parts])
+        return OccupancyQuery(occupancy >= self.params.occupancy_threshold, occupancy, seen)
+
+    def _occupancy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` points over all nodes."""
+        h, w = self.grid_camera.shape
+        f32 = np.float32
+        return summed_costs(
+            np.ascontiguousarray(points, dtype=f32),
+            self._projection,
+            self._offset,
+            self._active,
+            self._images,
+            h,
+            w,
+            f32(self.rig.bf_px_m),
+            f32(_MIN_DEPTH_M),
+            f32(self.params.max_range_m),
+            f32(self.params.disparity_sigma_px),
+            f32(self.params.free_discount),
+            f32(self.params.occluded_discount),
+            f32(self.params.wire_free_weight),
+            f32(self.expander.wire_front_px),
+        )
+
+
+@functools.cache
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """The process-wide worker pool of `threads` threads shared by all maps' queries."""
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="droan-query")
