@@ -21,11 +21,16 @@ class OccupancyQuery:
     occupancy: M = max(sum over nodes of occ(d_s), 0) (eq. 4.5), dimensionless.
     seen: True where at least one observation's field of view contains the point;
         where False the point is unknown (neither free nor occupied).
+    solid: collision by located evidence alone (measured depth, a reconstructed catenary,
+        true geometry), not by the wire depth prior (4.4.3): that prior puts a wire seen in
+        one image anywhere along its rays, so it keeps paths out but cannot say that one given
+        point (a goal) is occupied.
     """
 
     collision: np.ndarray
     occupancy: np.ndarray
     seen: np.ndarray
+    solid: np.ndarray
 
 
 class OccupancyMap(Protocol):

@@ -14,7 +14,8 @@ tracker commanded last and the occupancy map; it returns a `PlannerOutput` whose
 - ALIGNING: with the goal far off the nose at the start of a goal (or after a rewind), or
   closer than the tightest library turn could reach (no orbiting the goal): brake, then
   rotate towards it before choosing a trajectory.
-- ARRIVED / UNREACHABLE: hold. Unreachable: the goal seen in collision for
+- ARRIVED / UNREACHABLE: hold. Unreachable: the goal seen in solid collision (located
+  evidence, not the wire depth prior: `OccupancyQuery.solid`) for
   `unreachable_confirm_cycles` cycles from within `unreachable_range_m`, or stuck again after
   `max_rewinds` rewinds.
 """
@@ -118,7 +119,7 @@ class LocalPlanner:
 
         goal_answer = occupancy_map.query(self._goal[None, :])
         goal_blocked = (
-            bool(goal_answer.collision[0])
+            bool(goal_answer.solid[0])
             and bool(goal_answer.seen[0])
             and distance <= p.unreachable_range_m
         )

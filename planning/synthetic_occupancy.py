@@ -85,7 +85,9 @@ class SyntheticOccupancyMap:
         """`OccupancyMap.query`: collision only where seen; occupancy 1 there, else 0."""
         seen = self.seen(points_ned_m)
         collision = self.occupied(points_ned_m) & seen
-        return OccupancyQuery(collision=collision, occupancy=collision.astype(float), seen=seen)
+        return OccupancyQuery(
+            collision=collision, occupancy=collision.astype(float), seen=seen, solid=collision
+        )
 
 
 def wall(

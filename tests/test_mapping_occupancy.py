@@ -54,7 +54,7 @@ def numpy_reference(points, projection, offset, slots, images):
         d, *np.moveaxis(cells[..., :4], -1, 0), SIGMA, FREE, OCCLUDED
     )
     wire = wire_occupancy_cost(d, cells[..., 4], cells[..., 5], WIRE_FREE, WIRE_NEAR)
-    return np.maximum(occupancy_measure(stereo), occupancy_measure(wire)), observed.any(axis=0)
+    return occupancy_measure(stereo), occupancy_measure(wire), observed.any(axis=0)
 
 
 def test_the_kernel_answers_as_the_numpy_definition() -> None:
@@ -64,16 +64,21 @@ def test_the_kernel_answers_as_the_numpy_definition() -> None:
     points[:50, 0] = 0.0  # on node 0's camera plane: depth 0 must not poison the sums
     slots = np.array([0, 2, 3, 4])
     f32 = np.float32
-    occupancy, seen = summed_costs(
+    stereo, wire, seen = summed_costs(
         points, projection, offset, slots, images, H, W,
         f32(BF), f32(NEAR), f32(FAR), f32(SIGMA), f32(FREE), f32(OCCLUDED),
         f32(WIRE_FREE), f32(WIRE_NEAR),
     )  # fmt: skip
-    expected_occupancy, expected_seen = numpy_reference(points, projection, offset, slots, images)
+    expected_stereo, expected_wire, expected_seen = numpy_reference(
+        points, projection, offset, slots, images
+    )
+    occupancy = np.maximum(stereo, wire)
     assert 0.1 < seen.mean() < 0.95 and 0.05 < (occupancy > 1.0).mean() < 0.95
+    assert (wire >= 1.0).mean() > 0.05 and ((wire >= 1.0) & (stereo < 1.0)).any()
     assert np.isfinite(occupancy).all()
     np.testing.assert_array_equal(seen, expected_seen)
-    np.testing.assert_allclose(occupancy, expected_occupancy, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(stereo, expected_stereo, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(wire, expected_wire, rtol=1e-5, atol=1e-4)
 
 
 def test_the_occupied_cost_is_the_odds_of_the_eq_4_4_confidence() -> None:

@@ -7,13 +7,14 @@ unknown space is really unknown. Collisions are judged on the ground-truth geome
 
 import itertools
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
 from kinematic import flown_velocity
 
 from geometry.shapes import Box
+from mapping.query import OccupancyQuery
 from planning.library import generate_library
 from planning.params import PlanningParams
 from planning.planner import LocalPlanner
@@ -205,6 +206,22 @@ def test_a_goal_inside_an_obstacle_is_reported_unreachable() -> None:
     hold = flight.outputs[-1].reference
     assert hold.times_s.tolist() == [0.0]
     assert np.linalg.norm(hold.positions_ned_m[0] - flight.path[-1]) < 1.0
+    assert clearance_ok(boxes=[building], path=flight.path)
+
+
+class WirePriorOnly(SyntheticOccupancyMap):
+    """Its obstacles answer as the wire depth prior does: in collision, never solid."""
+
+    def query(self, points_ned_m: np.ndarray) -> OccupancyQuery:
+        return replace(super().query(points_ned_m), solid=np.zeros(len(points_ned_m), bool))
+
+
+def test_a_goal_behind_only_the_wire_prior_is_not_declared_unreachable() -> None:
+    # a wire seen without parallax lies anywhere on its rays (4.4.3): the prior keeps paths
+    # out of it but cannot say that the goal itself is occupied
+    building = Box(np.array([18.0, -2.0, -6.0]), np.array([22.0, 2.0, 0.0]))
+    flight = fly(WirePriorOnly(boxes=[building]), duration_s=10.0)
+    assert PlannerState.UNREACHABLE not in flight.states
     assert clearance_ok(boxes=[building], path=flight.path)
 
 

@@ -65,7 +65,7 @@ class PointMap:
         gaps = np.linalg.norm(points_ned_m[:, None] - self.centres[None], axis=-1)
         seen = self.seen_fn(points_ned_m)
         hit = (gaps <= self.radius_m).any(axis=1) & seen
-        return OccupancyQuery(hit, hit.astype(float), seen)
+        return OccupancyQuery(hit, hit.astype(float), seen, hit)
 
 
 def select(occupancy_map, params=PARAMS, **kwargs):

@@ -166,9 +166,11 @@ class GroundLink:
                 except asyncio.CancelledError:
                     await self._say_goodbye(client)
                     raise
-                finally:
+                finally:  # bounded: a dead network loop never answers the disconnect
                     with contextlib.suppress(aiomqtt.MqttError):
-                        await client.__aexit__(None, None, None)
+                        await wait_or_timeout(
+                            self._clock, client.__aexit__(None, None, None), CLOSE_TIMEOUT_S
+                        )
             except aiomqtt.MqttError as e:
                 self._on_failure(f"{type(e).__name__}: {e}", failures)
             except (OSError, ValueError) as e:  # unreadable password or TLS files

@@ -66,7 +66,7 @@ def inside_tube(points_ned_m: np.ndarray, obstacle: WireObstacle) -> np.ndarray:
 class CatenaryAwareMap:
     """`OccupancyMap` of a base map (DROAN) plus the tubes of confident catenaries.
 
-    A point inside a tube is seen and in collision with occupancy at least `gamma`
+    A point inside a tube is seen and in (solid) collision with occupancy at least `gamma`
     (`MappingParams.occupancy_threshold`, eq. 4.5); elsewhere the base map answers.
     """
 
@@ -89,6 +89,7 @@ class CatenaryAwareMap:
                 in_wire, np.maximum(answer.occupancy, self.occupancy_threshold), answer.occupancy
             ),
             seen=answer.seen | in_wire,
+            solid=answer.solid | in_wire,  # a reconstructed catenary is located (ch. 3)
         )
 
 

@@ -105,11 +105,12 @@ def summed_costs(
     occluded_discount: np.float32,
     wire_free_weight: np.float32,
     wire_near_px: np.float32,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(M `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` world points over the nodes
-    `slots`: `stereo_occupancy_cost`, `wire_occupancy_cost` and `occupancy_measure` fused.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M_stereo, M_wire `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` world points
+    over the nodes `slots`: `stereo_occupancy_cost`, `wire_occupancy_cost` and
+    `occupancy_measure` fused.
 
-    M = max(M_stereo, M_wire), each M = max(sum over nodes of occ, 0) (eq. 4.5). A pair
+    Each M = max(sum over nodes of occ, 0) (eq. 4.5); the map's M is their max. A pair
     counts only if the point is in the node's view: depth in (min_depth_m, max_range_m],
     inside the image. Node s projects with `projection[s]` (K R_cw) and `offset[s]` (K t_cw);
     its pixels are rows `s * height * width + v * width + u` of `images`, channels (front,
@@ -161,4 +162,4 @@ def summed_costs(
                     wire_sum[j] += one
                 else:
                     wire_sum[j] -= wire_free_weight
-    return np.maximum(np.maximum(stereo_sum, wire_sum), zero), seen
+    return np.maximum(stereo_sum, zero), np.maximum(wire_sum, zero), seen

@@ -194,7 +194,7 @@ class DroanMap:
         occupancy: max(M_stereo, M_wire), each M = max(sum over nodes of occ, 0) (eq. 4.5)
             with the stereo costs of Table 4.1 and the wire costs of the 4.4.5 note, summed
             separately (stereo cannot see wires, so its free evidence must not erase them);
-        collision: occupancy >= gamma;
+        collision: occupancy >= gamma; solid: M_stereo >= gamma (the wire prior left out);
         seen: some node observed the point directly: inside its image, in front of the camera,
             within `max_range_m`, on a valid pixel and not occluded (behind its back limit);
             only stereo observations make points seen (a wire mask alone says nothing of free
@@ -203,19 +203,21 @@ class DroanMap:
         points = np.asarray(points_ned_m, dtype=np.float32).reshape(-1, 3)
         n = len(points)
         if n == 0 or not self._order:
-            zeros = np.zeros(n, dtype=np.float32)
-            return OccupancyQuery(np.zeros(n, bool), zeros, np.zeros(n, bool))
+            none = np.zeros(n, bool)
+            return OccupancyQuery(none, np.zeros(n, dtype=np.float32), none, none)
         threads = self.params.query_threads
         if threads == 1 or n < self.params.query_split_min_points:
-            occupancy, seen = self._occupancy(points)
+            stereo, wire, seen = self._occupancy(points)
         else:
             parts = list(_pool(threads).map(self._occupancy, np.array_split(points, threads)))
-            occupancy = np.concatenate([part[0] for part in parts])
-            seen = np.concatenate([part[1] for part in parts])
-        return OccupancyQuery(occupancy >= self.params.occupancy_threshold, occupancy, seen)
+            stereo, wire, seen = (np.concatenate(part) for part in zip(*parts, strict=True))
+        gamma = self.params.occupancy_threshold
+        occupancy = np.maximum(stereo, wire)
+        return OccupancyQuery(occupancy >= gamma, occupancy, seen, stereo >= gamma)
 
-    def _occupancy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(M `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` points over all nodes."""
+    def _occupancy(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M_stereo, M_wire `(N,) float32`, seen `(N,) bool`) of `(N, 3) float32` points
+        over all nodes."""
         h, w = self.grid_camera.shape
         f32 = np.float32
         return summed_costs(
