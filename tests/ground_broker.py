@@ -17,7 +17,7 @@ import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
-from companion.clock import WallClock
+from companion.clock import WallClock, cancel_and_wait
 from companion.ground.link import CommandHandler, GroundLink, GroundLinkHealth
 from companion.ground.params import GroundParams
 from companion.ground.protocol import Ack, Command, StageReport, Status
@@ -231,10 +231,8 @@ async def running(
         if connect:
             await until(lambda: link.health().connected, 10.0)
         yield link
-    finally:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
+    finally:  # re-cancelled: aiomqtt's wait_for can swallow one cancel (a SUBACK racing it)
+        await cancel_and_wait([task])
 
 
 async def until(condition: Callable[[], bool], timeout_s: float) -> None:

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.clock import Clock, wait_or_timeout
+from companion.clock import Clock, cancel_and_wait, wait_or_timeout
 from companion.config import Settings
 from companion.flight.ground import GroundConnection
 from companion.flight.map_builder import MapBuilder, MapUpdate
@@ -158,8 +158,7 @@ class FlightProcess:
                 tasks = [group.create_task(stage(), name=stage.__name__) for stage in stages]
                 mission = group.create_task(self._mission(stop, until_done), name="mission")
                 await mission
-                for task in tasks:
-                    task.cancel()
+                await cancel_and_wait(tasks)  # re-cancels one that swallowed a cancel
         finally:
             if self._operation is not None and not self._operation.done():
                 self._operation.cancel()
