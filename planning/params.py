@@ -189,14 +189,14 @@ class PlanningParams(BaseModel):
         1.0, gt=0, le=10, description="speed of the final straight approach to the goal, m/s"
     )
     unreachable_confirm_cycles: int = Field(
-        5, ge=1, le=100, description="cycles the goal must be seen in collision, count"
+        5, ge=1, le=100, description="cycles the goal must be seen in solid collision, count"
     )
     unreachable_range_m: float = Field(
         6.0,
         gt=0,
         le=1000,
-        description="the goal counts as seen in collision only from this close: from farther it "
-        "may lie in a wire's 4-20 m depth prior (4.4.3) that nearer views clear, m",
+        description="the goal counts as seen in solid collision (`OccupancyQuery.solid`: never "
+        "the wire depth prior, 4.4.3) only from this close, where stereo depth is fine, m",
     )
     stop_path_max_gap_m: float = Field(
         1.0,
