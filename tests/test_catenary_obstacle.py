@@ -29,8 +29,11 @@ from planning.types import PlannerState, VehicleState
 
 SETTINGS = Settings()
 # The thesis' wire-free weight (4.4.5): with the default 0.25 the slab keeps more of its wedge
-# and the slab-only flight of the comparison below no longer finds a way at all.
-MAPPING = SETTINGS.mapping.model_copy(update={"wire_free_weight": 0.5})
+# and the slab-only flight from just above the wire below no longer finds a way at all.
+# The slab at eq. 4.3's width (no wire_position_margin_m), like the catenary's tube.
+MAPPING = SETTINGS.mapping.model_copy(
+    update={"wire_free_weight": 0.5, "wire_position_margin_m": 0.0}
+)
 PARAMS = SETTINGS.catenary.model_copy(update={"use_in_collision_check": True})
 # A wire across the flight line, 12 m ahead of the last keyframe and 3 m below it.
 THETA_TRUE = np.array([8.0, 0.0, -7.0, np.pi / 2, 40.0])
@@ -157,22 +160,20 @@ def fly(
     return state, np.array(path)
 
 
-def test_the_catenary_frees_the_flight_line_and_shortens_the_flight(approach) -> None:
+def test_a_line_3_m_above_the_wire_is_free_in_both_maps_and_flown_straight(approach) -> None:
+    # The slab's expansion is eq. 4.3 at each depth: 3 m above a wire 12 m ahead is outside
+    # it. (At the near limit's width throughout, the slab blocked 30 % of this line and the
+    # slab-only flight never reached the goal; only the catenary freed it.)
     line = np.linspace(START, GOAL, 41)
-    blocked_slab = approach["slab_only"].query(line).collision.mean()
-    blocked_catenary = approach["with_catenary"].query(line).collision.mean()
-    assert blocked_slab > 0.3 and blocked_catenary == 0.0
-
-    slab_state, slab_path = fly(approach["slab_only"])
-    cat_state, cat_path = fly(approach["with_catenary"])
-    assert cat_state is PlannerState.ARRIVED
-    cat_length = np.linalg.norm(np.diff(cat_path, axis=0), axis=1).sum()
-    assert cat_length < 1.1 * np.linalg.norm(GOAL - START)
-    clearance, _, _ = distance_to_polyline_m(cat_path, approach["dense"])
-    assert clearance.min() > MAPPING.robot_radius_m
-    # With the 4-20 m slab alone the start lies inside the wire evidence: no way to the goal.
-    assert slab_state is not PlannerState.ARRIVED
-    assert np.linalg.norm(slab_path[-1] - GOAL) > np.linalg.norm(cat_path[-1] - GOAL) + 5.0
+    for name in ("slab_only", "with_catenary"):
+        assert not approach[name].query(line).collision.any(), name
+        state, path = fly(approach[name])
+        assert state is PlannerState.ARRIVED, name
+        assert np.linalg.norm(np.diff(path, axis=0), axis=1).sum() < 1.1 * np.linalg.norm(
+            GOAL - START
+        )
+        clearance, _, _ = distance_to_polyline_m(path, approach["dense"])
+        assert clearance.min() > MAPPING.robot_radius_m
 
 
 def test_where_both_arrive_the_catenary_path_is_shorter_with_a_known_clearance(approach):
@@ -187,11 +188,11 @@ def test_where_both_arrive_the_catenary_path_is_shorter_with_a_known_clearance(a
         clearances[name] = distance_to_polyline_m(path, approach["dense"])[0].min()
     straight_m = np.linalg.norm(goal - start)
     assert lengths["with_catenary"] < 1.05 * straight_m
-    assert lengths["slab_only"] > 1.3 * lengths["with_catenary"]
+    assert lengths["slab_only"] > 1.15 * lengths["with_catenary"]  # 24.0 m against 19.7 m
     # the tube (robot radius + k sigma) is what the planner keeps clear of: never closer
     (obstacle,) = approach["obstacles"]
     assert clearances["with_catenary"] > obstacle.radius_m.max()
-    assert clearances["slab_only"] > clearances["with_catenary"]  # the slab's price: detours
+    assert clearances["slab_only"] > MAPPING.robot_radius_m  # the slab's price: a detour
 
 
 def test_the_mapper_keeps_keyframes_and_serves_the_same_pipeline(approach) -> None:

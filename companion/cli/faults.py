@@ -27,6 +27,7 @@ if TYPE_CHECKING:
 
 FAULT_WORLD = "fault-field.toml"  # in hil/world/examples
 FENCE_MARGIN_M = 20.0  # beyond the farthest goal, when the matrix widens a cylinder geofence
+OFFBOARD_LOSS_HOLD = 5  # COM_OBL_RC_ACT: Hold (stops where it is)
 _OWN_BROKER = {"mqtt_restart"}  # restart a broker the flight runs itself: not with --mqtt
 
 
@@ -67,7 +68,13 @@ def fly_faults(flight: FaultFlight) -> list[dict[str, Any]]:
         )
         # the matrix judges recovery: once the vehicle link is back it flies on to the goal
         mission = settings.mission.model_copy(update={"vehicle_link_back_action": "resume"})
-        settings = settings.model_copy(update={"mission": mission})
+        # and it flies the autopilot the pre-flight check asks for: on offboard loss PX4 holds
+        # where it is (COM_OBL_RC_ACT 5), not its default Return, which climbs to 30 m blind
+        # (that failsafe is the pre-flight check's and test_flight_link_sil's to judge)
+        vehicle = settings.vehicle_sim.model_copy(
+            update={"offboard_loss_action": OFFBOARD_LOSS_HOLD}
+        )
+        settings = settings.model_copy(update={"mission": mission, "vehicle_sim": vehicle})
         world = load_world(flight.world_file)
         # the matrix judges the faults, not the fence: the fault field's goal lies 220 m out,
         # past the default 100 m cylinder that a long --sequential flight reaches
@@ -127,7 +134,7 @@ def faults(
     ] = False,
     spacing_s: Annotated[
         float, typer.Option("--spacing-s", help="--sequential: from one fault's start to the next")
-    ] = 8.0,
+    ] = 10.0,
     start_s: Annotated[float, typer.Option("--start-s", help="after offboard engages, s")] = 3.0,
     duration_s: Annotated[float, typer.Option("--duration-s", help="each fault lasts, s")] = 2.0,
     judge_s: Annotated[

@@ -35,10 +35,10 @@ FaultOption = Annotated[
     typer.Option(
         "--fault",
         help="inject a fault (repeatable; `wireavoid faults --list` names them); the first "
-        "starts 3 s after offboard engages, the next ones 8 s apart",
+        "starts 3 s after offboard engages, the next ones 10 s apart",
     ),
 ]
-FAULT_SPACING_S = 8.0  # between the faults of one `sim --fault A --fault B` flight
+FAULT_SPACING_S = 10.0  # between the faults of one `sim --fault A --fault B` flight
 
 
 def checked_faults(names: list[str]) -> list[str]:

@@ -35,6 +35,7 @@ from mapping.droan.params import MappingParams
 # widest morphology window (half-width, cells) run at full grid resolution; wider ones are
 # run on a 2^k-pooled grid (conservatively rounded up).
 _MAX_DIRECT_HALF_WIDTH = 12
+_WIRE_DEPTH_SAMPLES = 64  # depths of the wire prior at which its expansion is evaluated
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,9 +162,9 @@ class DisparityExpander:
         self.bins = self._bins()
         self._bin_edges = np.array([b.low_px for b in self.bins], dtype=np.float32)
         wire_disparity = self.bf_px_m / params.wire_depth_near_m
-        self._wire_half_widths = self._half_widths(np.array([wire_disparity + self.margin_px]))
         self.wire_front_px = float(self._front(np.float32(wire_disparity)))
         self.wire_back_px = float(self.bf_px_m / params.wire_depth_far_m)
+        self._wire_levels = self._wire_expansion_levels()
 
     def _front(self, disparity_px: np.ndarray) -> np.ndarray:
         return front_disparity(
@@ -175,9 +176,12 @@ class DisparityExpander:
             disparity_px, self.bf_px_m, self.params.robot_radius_m, self.margin_px
         )
 
-    def _half_widths(self, lookup_disparity_px: np.ndarray) -> list[tuple[int, int]]:
-        """Grid-cell window half-widths `(u, v)` for LUT disparities `d + lambda sigma`."""
-        camera, r = self.rig.camera, self.params.robot_radius_m
+    def _half_widths(
+        self, lookup_disparity_px: np.ndarray, radius_m: float | None = None
+    ) -> list[tuple[int, int]]:
+        """Grid-cell window half-widths `(u, v)` for LUT disparities `d + lambda sigma` and an
+        expansion radius (default r_v)."""
+        camera, r = self.rig.camera, radius_m or self.params.robot_radius_m
         halves = []
         for axis in (0, 1):
             lo, hi = expansion_lut(camera, self.bf_px_m, r, lookup_disparity_px, axis)
@@ -187,6 +191,23 @@ class DisparityExpander:
             half_px = np.minimum(np.ceil(half_px - 1e-9), limit)
             halves.append((-(-half_px // self.pool_factor)).astype(int))
         return [(int(hu), int(hv)) for hu, hv in zip(*halves, strict=True)]
+
+    def _wire_expansion_levels(self) -> list[tuple[int, int, float]]:
+        """`(half_u, half_v, back_px)`: the windows of the wire prior's area expansion over its
+        depths (eq. 4.3 at each depth of the slab), narrowest (the far limit) first, each with
+        the smallest disparity at which its window may already be reached (the previous
+        sample's: conservative between samples)."""
+        samples = np.linspace(self.wire_back_px, self.bf_px_m / self.params.wire_depth_near_m,
+                              _WIRE_DEPTH_SAMPLES)  # fmt: skip
+        levels: list[tuple[int, int, float]] = []
+        previous = self.wire_back_px
+        radius_m = self.params.robot_radius_m + self.params.wire_position_margin_m
+        widths = self._half_widths(samples + self.margin_px, radius_m)
+        for d, width in zip(samples, widths, strict=True):
+            if not levels or width != levels[-1][:2]:
+                levels.append((*width, float(previous)))
+            previous = float(d)
+        return levels
 
     def _bins(self) -> list[ExpansionBin]:
         """Disparity bins, each narrower than `expansion_bin_fraction` of its band width."""
@@ -308,14 +329,22 @@ class DisparityExpander:
             integer k dividing `pool_factor`: a colour camera registered to the disparity
             camera at a k-times lower resolution (the CNN's input size), pooled by
             `pool_factor / k` onto the same grid.
-        Wire pixels get the synthetic disparity of the near prior (`wire_depth_near_m`), are
-        area-expanded and depth-expanded to the front like a stereo return; the back limit is
-        the far prior (`wire_depth_far_m`) itself. Cells away from any wire are 0 (no wire).
+        Wire pixels span the depth prior [`wire_depth_near_m`, `wire_depth_far_m`]; the front
+        is the near limit depth-expanded like a stereo return. The area expansion is the one
+        of eq. 4.3 at each depth of the slab, not only at its near limit (beyond the thesis):
+        a cell the expansion reaches only at nearer depths has its back limit there. At the
+        near limit's width throughout, a wire (or a false one on the horizon) 10-20 m away
+        filled a wedge two to five times the vehicle's size, which views from a metre higher or
+        lower could not vote away (the vehicle climbed after it, 10 m in the fault field).
+        Cells away from any wire are 0 (no wire).
         """
         mask = np.asarray(wire_mask, dtype=bool)
         pooled = _pool(mask.astype(np.float32), self._wire_pool_factor(mask.shape), np.fmax, 0.0)
-        half_u, half_v = self._wire_half_widths[0]
-        hit = _morph(pooled, half_u, half_v, dilate=True) > 0
-        front = np.where(hit, np.float32(self.wire_front_px), np.float32(0))
-        back = np.where(hit, np.float32(self.wire_back_px), np.float32(0))
+        back = np.zeros(pooled.shape, np.float32)
+        reached, reach_u, reach_v = pooled, 0, 0
+        for half_u, half_v, back_px in self._wire_levels:  # nested windows: grow step by step
+            reached = _morph(reached, half_u - reach_u, half_v - reach_v, dilate=True)
+            reach_u, reach_v = half_u, half_v
+            back[(reached > 0) & (back == 0)] = back_px
+        front = np.where(back > 0, np.float32(self.wire_front_px), np.float32(0))
         return ExpandedImage(front, back)

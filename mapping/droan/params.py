@@ -57,6 +57,14 @@ class MappingParams(BaseModel):
         description="discount of potentially-safe (occluded, behind d_b) evidence; the thesis "
         "uses 0.5 (Table 4.1), 0 lets only views that saw a point clear it (unknown is not free)",
     )
+    wire_position_margin_m: float = Field(
+        0.25,
+        ge=0,
+        le=2,
+        description="added to r_v in the wire prior's area expansion (4.4.3, eq. 4.3 at each "
+        "depth of the slab): where a wire's pixels place it is less certain than a stereo "
+        "return (the mask's width, pose interpolation, the CNN's blur), m",
+    )
     wire_depth_near_m: float = Field(4.0, gt=0, description="wire depth prior, near limit (4.4.3)")
     wire_depth_far_m: float = Field(20.0, gt=0, description="wire depth prior, far limit (4.4.3)")
     max_range_m: float = Field(
