@@ -130,6 +130,13 @@ class PlanningParams(BaseModel):
     min_altitude_m: float = Field(
         1.0, ge=0, le=100, description="flight floor above home (NED z = 0); lower is collision, m"
     )
+    max_altitude_m: float = Field(
+        120.0,
+        gt=0,
+        le=10000,
+        description="flight ceiling above home (NED z = 0); higher is collision (above it "
+        "already: no higher than now), m",
+    )
     min_track_s: float = Field(
         1.5,
         ge=0,

@@ -168,7 +168,9 @@ def select_trajectory(
         positions_ned_m, velocities_ned_mps, origin_ned_m, track, params, own_center_ned_m
     )
     floor_z = max(-params.min_altitude_m, float(origin_ned_m[2]))
-    below_floor = positions_ned_m[..., 2] > floor_z + 1e-6
+    ceiling_z = min(-params.max_altitude_m, float(origin_ned_m[2]))
+    z = positions_ned_m[..., 2]
+    out_of_band = (z > floor_z + 1e-6) | (z < ceiling_z - 1e-6)
 
     order = np.argsort(np.where(k == stop_index, np.inf, cost), kind="stable")
     chunk = n_traj if params.check_mode is CheckMode.ALL else params.check_chunk_size
@@ -186,7 +188,7 @@ def select_trajectory(
         unseen = np.zeros(mask.shape, bool)
         collide[mask] = np.asarray(answer.collision, bool)
         unseen[mask] = ~np.asarray(answer.seen, bool)
-        collide |= below_floor[batch] & mask
+        collide |= out_of_band[batch] & mask
         if params.unknown_policy is UnknownPolicy.COLLISION:
             collide |= unseen
         elif params.unknown_policy is UnknownPolicy.COST:

@@ -269,3 +269,25 @@ def test_descent_costs_only_below_the_start_and_the_goal() -> None:
         costs[name] = priced.cost[:2] - plain.cost[:2]
     np.testing.assert_allclose(costs["level"], [0.0, 0.3 * 2.0])
     np.testing.assert_allclose(costs["below"], [0.0, 0.0])
+
+
+def test_the_ceiling_is_a_collision_but_never_stops_a_descent_from_above_it() -> None:
+    # two ways forward from 3 m: level, and climbing 2 m towards a goal 2 m up (the cheaper)
+    level = np.array([[1.0, 0, 0], [2, 0, 0], [3, 0, 0]])
+    up = level - np.array([[0, 0, 0.7], [0, 0, 1.4], [0, 0, 2.0]])
+    positions = np.stack([up, level, np.zeros((3, 3))]) + ORIGIN
+    velocities = np.zeros_like(positions)
+    velocities[:2, :, 0] = 1.0
+    goal = GOAL - np.array([0.0, 0.0, 2.0])
+
+    def chosen(origin_up_m: float, ceiling_m: float) -> int | None:
+        lift = np.array([0.0, 0.0, -origin_up_m])
+        params = PARAMS.model_copy(update={"max_altitude_m": ceiling_m, "min_altitude_m": 0.0})
+        origin = ORIGIN + lift
+        return select_trajectory(
+            positions + lift, velocities, origin, goal, FORWARD, PointMap(), params, 2
+        ).index
+
+    assert chosen(0.0, 120.0) == 0  # the climb, towards the goal
+    assert chosen(0.0, 4.0) == 1  # the climb's 5 m is over the 4 m ceiling: level
+    assert chosen(3.0, 4.0) == 1  # above it already (6 m): no higher, level is allowed
