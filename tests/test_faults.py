@@ -208,7 +208,7 @@ def test_every_fault_in_turn_is_survived_and_handled_in_time() -> None:
     assert broker["status_resumed_after_s"] < broker["reconnected_after_s"] + 0.6, broker
     # ... and moves on (> 0.5 m before the next fault) after at least 8 of the 10: the small
     # camera's false horizon wire and ground wall leave the planner searching (rotating,
-    # rewinding) for seconds at a time, in 1-2 of the 10 windows of 3 of 5 matrix flights
+    # rewinding) for seconds at a time, in 1-2 of the 10 windows of 3 of 6 local matrix flights
     moved_on = [r["name"] for r in summary["faults"] if r["recovered"]]
     assert len(moved_on) >= len(MATRIX) - 2, summary["faults"]
     assert summary["collisions"] == 0
