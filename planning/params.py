@@ -135,7 +135,8 @@ class PlanningParams(BaseModel):
         gt=0,
         le=10000,
         description="flight ceiling above home (NED z = 0); higher is collision (above it "
-        "already: no higher than now), m",
+        "already: no higher than now); the flight process flies under the lower of this and "
+        "geofence.max_altitude_m, m",
     )
     min_track_s: float = Field(
         1.5,

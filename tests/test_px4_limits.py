@@ -71,3 +71,17 @@ def test_planning_overrides_make_the_planners_braking_formula_match():
         # the formula reaches the vehicle's distance, or its minimum (accel = sqrt(j v)) below
         assert planned >= float(limits.braking_distance_m(2.0)) - 0.05
         assert params.max_accel_mps2 <= limits.max_accel_mps2
+
+
+def test_the_vehicle_check_flies_the_planner_under_the_geofence_ceiling() -> None:
+    from companion.config import Settings
+    from companion.flight.vehicle_check import vehicle_check
+    from companion.ground.params import GeofenceParams
+    from hil.vehicle.params import VehicleSimParams, px4_parameter_table
+
+    vehicle = VehicleSimParams()
+    px4 = {name: getattr(vehicle, field) for name, field in px4_parameter_table().items()}
+    fenced = Settings(geofence=GeofenceParams(max_altitude_m=30.0))
+    assert vehicle_check(fenced, px4).settings.planning.max_altitude_m == 30.0
+    low = fenced.model_copy(update={"planning": PlanningParams(max_altitude_m=12.0)})
+    assert vehicle_check(low, px4).settings.planning.max_altitude_m == 12.0

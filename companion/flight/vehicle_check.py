@@ -57,7 +57,11 @@ def mission_reach_m(settings: Settings) -> tuple[float, float]:
 def vehicle_check(settings: Settings, parameters: dict[str, float | int | None]) -> VehicleCheck:
     """The check on parameters already read (pure)."""
     limits = vehicle_limits(parameters, settings.planning.max_speed_mps)
-    planning = settings.planning.model_copy(update=limits.planning_overrides())
+    # the planner never plans above the geofence's ceiling (there it would be a failsafe)
+    ceiling_m = min(settings.planning.max_altitude_m, settings.geofence.max_altitude_m)
+    planning = settings.planning.model_copy(
+        update={**limits.planning_overrides(), "max_altitude_m": ceiling_m}
+    )
     height_m, reach_m = mission_reach_m(settings)
     report = failsafe_report(
         parameters,

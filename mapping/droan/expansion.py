@@ -181,7 +181,8 @@ class DisparityExpander:
     ) -> list[tuple[int, int]]:
         """Grid-cell window half-widths `(u, v)` for LUT disparities `d + lambda sigma` and an
         expansion radius (default r_v)."""
-        camera, r = self.rig.camera, radius_m or self.params.robot_radius_m
+        camera = self.rig.camera
+        r = self.params.robot_radius_m if radius_m is None else radius_m
         halves = []
         for axis in (0, 1):
             lo, hi = expansion_lut(camera, self.bf_px_m, r, lookup_disparity_px, axis)
