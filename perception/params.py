@@ -141,6 +141,21 @@ class SyntheticParams(BaseModel):
     contrast_max: float = Field(
         0.3, ge=0, le=1, description="most enforced wire-background luminance difference"
     )
+    horizon_wire_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of forward views whose first bundle hangs level at the camera's own "
+        "height, so it lies along the horizon against the tree line and hills (a drone flying "
+        "level with a wire; 0 keeps the thesis' anchors anywhere in view)",
+    )
+    horizon_contrast_min: float = Field(
+        0.12,
+        ge=0,
+        le=1,
+        description="least luminance difference enforced for those horizon wires (0-1 scale): "
+        "a grey wire before hazed distant trees differs by ~0.03",
+    )
     width_max_px: float = Field(12.0, gt=0, le=60, description="thickest rendered wire, px")
     no_wire_probability: float = Field(
         0.1, ge=0, le=1, description="share of images without wires (hard negatives)"

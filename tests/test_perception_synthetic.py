@@ -14,9 +14,11 @@ from perception.training.synthetic import (
     WireBundle,
     catenary_height_m,
     composite_wires,
+    horizon_anchor,
     horizon_of,
     level_view,
     rendered_sample,
+    sample_bundle,
     synthetic_sample,
     wire_segments,
     with_local_contrast,
@@ -262,3 +264,33 @@ def test_wire_shadows_darken_the_ground_but_stay_unlabelled():
     assert darker.any(axis=0).mean() > 0.9  # a faint shadow line across the image
     _, mask, _ = composite_wires(np.random.default_rng(1), shaded, [bundle], cam, SyntheticParams())
     assert mask.any(axis=0).mean() > 0.9 and (mask > 0)[darker].mean() < 0.05
+
+
+def test_horizon_wires_hang_level_at_the_camera_height_along_the_horizon():
+    cam = level_camera(altitude_m=3.35, roll_rad=0.05)
+    horizon = horizon_of(cam)
+    params = SyntheticParams()
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        anchor = horizon_anchor(rng, params, cam)
+        assert -anchor[2] == pytest.approx(3.35, abs=1e-6)
+        assert 2.5 <= np.linalg.norm(anchor[:2]) <= 60.0
+        uv, _ = cam.project(anchor[None])
+        v_line = horizon.v_center_px + horizon.slope * (uv[0, 0] - 80)
+        assert uv[0, 1] == pytest.approx(v_line, abs=0.01)
+    bundles = [sample_bundle(rng, params, cam, on_horizon=True) for _ in range(30)]
+    assert all(b is not None and b.on_horizon for b in bundles)
+    # every conductor runs near the camera's height over the span around its anchor
+    heights = [-np.median(c[:, 2]) for b in bundles for c in b.conductors_ned_m]
+    assert np.median(np.abs(np.array(heights) - 3.35)) < 1.5
+    looking_down = level_camera(pitch_rad=-1.2)  # the horizon above the image
+    assert horizon_anchor(rng, params, looking_down) is None
+
+
+def test_horizon_wire_option_labels_wires_and_leaves_other_seeds_unchanged():
+    level = SyntheticParams(horizon_wire_probability=1.0, no_wire_probability=0.0)
+    assert sum(synthetic_sample(11, i, 96, 128, level)[1].any() for i in range(12)) >= 10
+    # no extra random draw when the option is off: earlier seeds render as before
+    off = SyntheticParams(horizon_wire_probability=0.0)
+    a, b = synthetic_sample(5, 1, 48, 64, off), synthetic_sample(5, 1, 48, 64)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])

@@ -176,6 +176,14 @@ def train(
         float,
         typer.Option(min=0, max=1, help="share of views pitched down at cluttered ground"),
     ] = _SYNTHETIC.aerial_probability,
+    horizon_wire_probability: Annotated[
+        float,
+        typer.Option(min=0, max=1, help="share of forward views with a level wire on the horizon"),
+    ] = _SYNTHETIC.horizon_wire_probability,
+    horizon_contrast_min: Annotated[
+        float,
+        typer.Option(min=0, max=1, help="least luminance difference of those horizon wires"),
+    ] = _SYNTHETIC.horizon_contrast_min,
     fittings_probability: Annotated[
         float, typer.Option(min=0, max=1, help="share of bundles with insulators and spacers")
     ] = _SYNTHETIC.fittings_probability,
@@ -233,6 +241,8 @@ def train(
         photo_probability=photo_probability,
         contrast_min=contrast_min,
         aerial_probability=aerial_probability,
+        horizon_wire_probability=horizon_wire_probability,
+        horizon_contrast_min=horizon_contrast_min,
         fittings_probability=fittings_probability,
         tower_probability=tower_probability,
         sensor_effects_probability=sensor_effects_probability,

@@ -36,6 +36,8 @@ SKIMAGE_PHOTOS = (
 package's data/README and docs) used as backgrounds and ground textures when it is installed."""
 
 _PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".webp")
+TREE_LINE_PROBABILITY = 0.6
+"""Share of procedural landscapes with a tree line on the horizon."""
 
 
 @dataclass(frozen=True)
@@ -228,9 +230,15 @@ def _fill_below(img: np.ndarray, layer: np.ndarray, mask: np.ndarray) -> None:
 
 
 def landscape(
-    rng: np.random.Generator, h: int, w: int, horizon: Horizon, pool: PhotoPool | None
+    rng: np.random.Generator,
+    h: int,
+    w: int,
+    horizon: Horizon,
+    pool: PhotoPool | None,
+    tree_line_probability: float = TREE_LINE_PROBABILITY,
 ) -> np.ndarray:
-    """Sky over hills, a tree line and textured ground, each layer with its own silhouette."""
+    """Sky over hills, a tree line (with `tree_line_probability`) and textured ground, each
+    layer with its own silhouette."""
     img = sky(rng, h, w, horizon)
     for _ in range(int(rng.integers(0, 3))):
         hills = _ridge(rng, w, rng.uniform(5, h * 0.25), int(rng.integers(2, 8)))
@@ -238,7 +246,7 @@ def landscape(
         colour = img[int(np.clip(horizon.v_center_px, 0, h - 1)), w // 2]
         layer = terrain(rng, h, w) * (1 - haze) + colour * haze
         _fill_below(img, layer, _ground_mask(h, w, horizon, hills))
-    if rng.random() < 0.6:
+    if rng.random() < tree_line_probability:
         trees = _ridge(rng, w, rng.uniform(3, h * 0.2), int(rng.integers(20, 80)))
         _fill_below(
             img, vegetation(rng, h, w) * rng.uniform(0.5, 1.0), _ground_mask(h, w, horizon, trees)
@@ -329,13 +337,14 @@ def background(
     horizon: Horizon,
     pool: PhotoPool | None = None,
     photo_probability: float = 0.3,
+    tree_line_probability: float = TREE_LINE_PROBABILITY,
 ) -> np.ndarray:
     """A random background (H, W, 3) float32 in [0, 1]: a photograph (when the pool has any,
     with photo_probability) or a procedural landscape, plus straight-edge distractors."""
     if pool is not None and len(pool) > 0 and rng.random() < photo_probability:
         img = photo_crop(rng, pool, h, w)
     else:
-        img = landscape(rng, h, w, horizon, pool)
+        img = landscape(rng, h, w, horizon, pool, tree_line_probability)
     img = np.ascontiguousarray(img, dtype=np.float32)
     add_distractors(rng, img, horizon)
     return img

@@ -40,6 +40,7 @@ from perception.inputs import network_input
 from perception.params import SyntheticParams
 from perception.training.aerial import ground_view
 from perception.training.backgrounds import (
+    TREE_LINE_PROBABILITY,
     Horizon,
     PhotoPool,
     background,
@@ -102,6 +103,9 @@ class WireBundle:
     """Unlabelled supports: (top, bottom, diameter_m) of poles, cross-arms and tower members."""
     fittings_ned_m: tuple[tuple[np.ndarray, np.ndarray, float], ...] = ()
     """Unlabelled insulator strings and spacers: (end, end, diameter_m), in their own colour."""
+    on_horizon: bool = False
+    """Hung level at the camera's height (`horizon_anchor`): its contrast floor is
+    ``horizon_contrast_min``."""
 
 
 def sample_camera(rng: np.random.Generator, p: SyntheticParams, h: int, w: int) -> PosedCamera:
@@ -151,6 +155,23 @@ def _anchor(rng: np.random.Generator, p: SyntheticParams, cam: PosedCamera) -> n
             s = np.exp(rng.uniform(np.log(lo), np.log(hi)))
             return cam.position_ned_m + s * ray
     return None
+
+
+def horizon_anchor(
+    rng: np.random.Generator, p: SyntheticParams, cam: PosedCamera
+) -> np.ndarray | None:
+    """A world point at the camera's own height, seen on the horizon at a random column, 2.5-60 m
+    away (log-uniform): a wire there lies along the horizon, against the tree line and hills;
+    None when the horizon is out of view."""
+    horizon = horizon_of(cam)
+    u = rng.uniform(0, cam.camera.width_px)
+    v = horizon.v_center_px + horizon.slope * (u - cam.camera.width_px / 2)
+    if not 0 <= v < cam.camera.height_px:
+        return None
+    ray = cam.ray_ned(u, v) * [1.0, 1.0, 0.0]
+    lo, hi = p.wire_distance_min_m, max(p.wire_distance_min_m, min(p.wire_distance_max_m, 60.0))
+    s = np.exp(rng.uniform(np.log(lo), np.log(hi)))
+    return cam.position_ned_m + s * ray / np.linalg.norm(ray)
 
 
 def sample_aerial_camera(
@@ -230,12 +251,15 @@ def sample_bundle(
     p: SyntheticParams,
     cam: PosedCamera,
     material_weights: tuple[float, ...] = (0.35, 0.3, 0.1, 0.15, 0.1),
+    on_horizon: bool = False,
 ) -> WireBundle | None:
     """A random bundle of parallel conductors passing through a visible anchor point.
 
     material_weights: probabilities of ``MATERIALS``.
+    on_horizon: anchored by `horizon_anchor`, level (straight) or with the anchor near the
+    catenary's lowest point, so that the wire runs along the horizon.
     """
-    anchor = _anchor(rng, p, cam)
+    anchor = horizon_anchor(rng, p, cam) if on_horizon else _anchor(rng, p, cam)
     if anchor is None:
         return None
     yaw = rng.uniform(0, np.pi)
@@ -246,14 +270,18 @@ def sample_bundle(
     at = rng.uniform(0.05, 0.95) * span
     straight = rng.random() < p.straight_probability
     if straight:
-        elevation = np.deg2rad(np.clip(rng.normal(0, 15), -50, 50))
+        elevation = 0.0 if on_horizon else np.deg2rad(np.clip(rng.normal(0, 15), -50, 50))
         direction = np.cos(elevation) * along + np.sin(elevation) * _UP_NED
         curve = anchor + (x - at)[:, None] * direction
         step = span * direction
     else:
         sag_ratio = rng.uniform(0.003, max(p.sag_ratio_max, 0.004))
         a = span / (8 * sag_ratio)
-        x_low = span / 2 + rng.uniform(-0.6, 0.6) * span
+        x_low = (
+            at + rng.uniform(-0.1, 0.1) * span
+            if on_horizon
+            else span / 2 + rng.uniform(-0.6, 0.6) * span
+        )
         height = catenary_height_m(x, a, x_low) - catenary_height_m(np.array(at), a, x_low)
         curve = anchor + (x - at)[:, None] * along + height[:, None] * _UP_NED
         step = span * along + (height[-1] - height[0]) * _UP_NED
@@ -294,6 +322,7 @@ def sample_bundle(
         material=str(rng.choice(MATERIALS, p=list(material_weights))),
         poles_ned_m=tuple(poles),
         fittings_ned_m=tuple(fittings),
+        on_horizon=on_horizon,
     )
 
 
@@ -370,7 +399,8 @@ def composite_wires(
         colour = np.clip(base * along + glint, 0, 1)
         haze = min(0.6, 1 - np.exp(-float(np.median(depths)) / visibility_m))
         colour = colour * (1 - haze) + haze_rgb * haze
-        colour = with_local_contrast(colour, img, rng.uniform(p.contrast_min, p.contrast_max))
+        floor = p.horizon_contrast_min if bundle.on_horizon else p.contrast_min
+        colour = with_local_contrast(colour, img, rng.uniform(floor, p.contrast_max))
         alpha = (coverage * rng.uniform(0.75, 1.0))[..., None]
         img = img * (1 - alpha) + colour * alpha
         thick = widths >= 2.0
@@ -581,13 +611,17 @@ def rendered_sample(
     else:
         cam = sample_camera(rng, p, height_px, width_px)
         q, materials = p, (0.35, 0.3, 0.1, 0.15, 0.1)
+    level = not aerial and p.horizon_wire_probability > 0
+    level = level and rng.random() < p.horizon_wire_probability
     bundles: list[WireBundle] = []
     if rng.random() >= p.no_wire_probability:
-        for _ in range(int(rng.integers(1, p.bundles_max + 1))):
-            bundle = sample_bundle(rng, q, cam, materials)
+        for k in range(int(rng.integers(1, p.bundles_max + 1))):
+            bundle = sample_bundle(rng, q, cam, materials, on_horizon=level and k == 0)
             if bundle is not None:
                 bundles.append(bundle)
-    bg = background(rng, height_px, width_px, horizon_of(cam), pool, p.photo_probability)
+    # a level wire's hard case is the tree line behind it: a landscape, always with trees
+    photos, trees = (0.0, 1.0) if level else (p.photo_probability, TREE_LINE_PROBABILITY)
+    bg = background(rng, height_px, width_px, horizon_of(cam), pool, photos, trees)
     if aerial:
         bg, ground = ground_view(rng, bg, cam.camera, cam.world_from_camera, pool)
         if rng.random() < p.wire_shadow_probability:
