@@ -52,6 +52,7 @@ from perception.training.labels import label_mask, rasterise
 _NEAR_M = 0.3  # near clipping depth of the camera, m
 _POINTS_PER_SPAN = 240
 _UP_NED = np.array([0.0, 0.0, -1.0])
+_HORIZON_WIRE_MAX_M = 60.0  # farthest level wire on the horizon: beyond it, it is sub-pixel
 MATERIALS = ("dark", "metal", "oxidised", "bright", "rust")
 
 
@@ -160,16 +161,19 @@ def _anchor(rng: np.random.Generator, p: SyntheticParams, cam: PosedCamera) -> n
 def horizon_anchor(
     rng: np.random.Generator, p: SyntheticParams, cam: PosedCamera
 ) -> np.ndarray | None:
-    """A world point at the camera's own height, seen on the horizon at a random column, 2.5-60 m
-    away (log-uniform): a wire there lies along the horizon, against the tree line and hills;
-    None when the horizon is out of view."""
+    """A world point at the camera's own height, seen on the horizon at a random column,
+    wire_distance_min_m to _HORIZON_WIRE_MAX_M away (log-uniform): a wire there lies along the
+    horizon, against the tree line and hills; None when the horizon is out of view."""
     horizon = horizon_of(cam)
     u = rng.uniform(0, cam.camera.width_px)
     v = horizon.v_center_px + horizon.slope * (u - cam.camera.width_px / 2)
     if not 0 <= v < cam.camera.height_px:
         return None
     ray = cam.ray_ned(u, v) * [1.0, 1.0, 0.0]
-    lo, hi = p.wire_distance_min_m, max(p.wire_distance_min_m, min(p.wire_distance_max_m, 60.0))
+    lo, hi = (
+        p.wire_distance_min_m,
+        max(p.wire_distance_min_m, min(p.wire_distance_max_m, _HORIZON_WIRE_MAX_M)),
+    )
     s = np.exp(rng.uniform(np.log(lo), np.log(hi)))
     return cam.position_ned_m + s * ray / np.linalg.norm(ray)
 
