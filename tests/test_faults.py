@@ -206,11 +206,13 @@ def test_every_fault_in_turn_is_survived_and_handled_in_time() -> None:
     broker = by_name["mqtt_restart"]  # the ground link back at its backoff's next attempt
     assert not broker["interrupted"] and broker["reconnected_after_s"] < 2.5, broker
     assert broker["status_resumed_after_s"] < broker["reconnected_after_s"] + 0.6, broker
-    # ... and moves on (> 0.5 m before the next fault) after at least 8 of the 10: the small
-    # camera's false horizon wire and ground wall leave the planner searching (rotating,
-    # rewinding) for seconds at a time, in 1-2 of the 10 windows of 3 of 6 local matrix flights
+    # ... and moves on (> 0.5 m before the next fault) after at least 9 of the 10: all 10 in
+    # 5 of 6 local matrix flights, 9 in the sixth (camera_drop, 0.29 m); with computation
+    # charged twice over (a slower machine), the small camera's false horizon wire left the
+    # planner searching (rotating, rewinding) past the next fault in one window of 2 of 3
+    # flights (camera_delay, link_loss)
     moved_on = [r["name"] for r in summary["faults"] if r["recovered"]]
-    assert len(moved_on) >= len(MATRIX) - 2, summary["faults"]
+    assert len(moved_on) >= len(MATRIX) - 1, summary["faults"]
     assert summary["collisions"] == 0
     assert not math.isnan(summary["wall_s"])
 
