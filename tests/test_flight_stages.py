@@ -139,6 +139,17 @@ def test_the_map_builder_registers_a_frame_at_its_interpolated_camera_pose() -> 
     # the wire seen straight ahead, 4-20 m away (4.4.3), is in the map; the ground below is not
     ahead = pose.apply(np.array([[0.0, -0.55, 8.0]]))  # camera frame: x right, y down, z fwd
     assert builder.occupancy_map().query(ahead).occupancy[0] > 0
+    # taken in the takeoff climb, a frame is fused without its wire evidence: stereo alone
+    climb = MapBuilder(mapping, CatenaryParams())
+    update = climb.insert(frame, pose, wire_evidence=False)  # nothing left to fuse
+    assert update.result is None and not update.wire_evidence and len(climb.droan) == 0
+    far = np.full((240, 320), 0.5, np.float32)  # the stereo sees everything 80+ m off
+    update = climb.insert(Perception(1.05, 7, wire, far), pose, wire_evidence=False)
+    assert update.result is InsertResult.KEYFRAME and not update.wire_evidence
+    assert climb.newest_frame_s == 1.05  # fused: perception stays fresh
+    assert climb.occupancy_map().query(ahead).occupancy[0] == 0
+    climb.insert(Perception(1.15, 8, wire, far), pose)  # the same once airborne: the wire
+    assert climb.occupancy_map().query(ahead).occupancy[0] > 0
 
 
 def _state(position, velocity=(0.0, 0.0, 0.0), stamp_s=0.0) -> VehicleState:

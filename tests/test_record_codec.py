@@ -90,6 +90,9 @@ def test_telemetry_map_plan_setpoint_and_mission_messages_come_back_exactly() ->
     back_map = codec.decode_map(_roundtrip(codec.encode_map(update, 5.6))[0])
     np.testing.assert_array_equal(back_map.world_from_camera.rotation, pose.rotation)
     assert (back_map.result, back_map.nodes, back_map.wires) == (InsertResult.KEYFRAME, 3, 1)
+    assert back_map.wire_evidence
+    climb = MapUpdate(5.5, 9, pose, InsertResult.KEYFRAME, 3, 0, wire_evidence=False)
+    assert not codec.decode_map(_roundtrip(codec.encode_map(climb, 5.6))[0]).wire_evidence
     unregistered = codec.decode_map(
         _roundtrip(codec.encode_map(MapUpdate(5.7, 10, None, None, 3, 0), 5.8))[0]
     )

@@ -10,7 +10,7 @@ from typing import Any
 from companion.cli.settings import load_sim_settings
 from companion.cli.sim_addons import FlightAddon
 from companion.cli.sim_flight import fly_world
-from companion.record.reader import summary
+from companion.record.reader import iter_recorded, summary
 from companion.record.replay import replay
 from companion.record.writer import start_recording
 from hil.world.file import load_world
@@ -45,6 +45,10 @@ def test_a_recorded_flight_replays_exactly(tmp_path: Path) -> None:
     info = summary(path)
     assert info["frames"] == record.report.frames and info["frames"] > 40
     assert info["channels"]["/plan"]["messages"] == record.report.plans
+    # the frames on the ground and in the takeoff climb gave the map their stereo alone
+    wires = [m.payload["wire_evidence"] for m in iter_recorded([path], {"/map"})]
+    airborne = wires.index(True)
+    assert airborne > 20 and not any(wires[:airborne]) and sum(wires[airborne:]) > 20, wires
     result, _ = replay([path])
     assert result.messages_replayed == record.report.perceptions + record.report.fused + (
         record.report.unregistered + record.report.plans

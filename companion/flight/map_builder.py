@@ -33,6 +33,7 @@ class MapUpdate:
 
     result: DROAN's insert result, or None when the pose history did not cover the stamp
     (the frame was not fused). nodes: pose-graph size after it; wires: confident catenaries.
+    wire_evidence: whether the frame's wire mask was fused (else its stereo alone).
     """
 
     stamp_s: float
@@ -41,6 +42,7 @@ class MapUpdate:
     result: InsertResult | None
     nodes: int
     wires: int
+    wire_evidence: bool = True
 
 
 class MapBuilder:
@@ -72,13 +74,18 @@ class MapBuilder:
             else world_from_camera(world_from_body, self.body_from_camera)
         )
 
-    def insert(self, perception: Perception, pose: Pose | None) -> MapUpdate:
-        """Fuse `perception` taken from `pose` (`camera_pose_at` of its stamp)."""
-        if pose is None:
+    def insert(
+        self, perception: Perception, pose: Pose | None, wire_evidence: bool = True
+    ) -> MapUpdate:
+        """Fuse `perception` taken from `pose` (`camera_pose_at` of its stamp); its wire mask
+        only with `wire_evidence` (`flight.wires_during_takeoff_and_landing`). Not fused (result
+        None) without a pose, or when nothing of the frame is left to fuse."""
+        mask = perception.wire_mask if wire_evidence else None
+        if pose is None or (mask is None and perception.disparity_px is None):
             return MapUpdate(
-                perception.stamp_s, perception.sequence, None, None, len(self.droan), 0
-            )
-        mask = perception.wire_mask
+                perception.stamp_s, perception.sequence, None, None, len(self.droan), 0,
+                wire_evidence,
+            )  # fmt: skip
         wires = 0
         if mask is not None and self._catenary_params.use_in_collision_check:
             catenary = self._catenary_mapper(mask.shape[1])
@@ -88,8 +95,9 @@ class MapBuilder:
         result = self.droan.insert(perception.stamp_s, pose, perception.disparity_px, mask)
         self.newest_frame_s = max(self.newest_frame_s, perception.stamp_s)
         return MapUpdate(
-            perception.stamp_s, perception.sequence, pose, result, len(self.droan), wires
-        )
+            perception.stamp_s, perception.sequence, pose, result, len(self.droan), wires,
+            wire_evidence,
+        )  # fmt: skip
 
     def occupancy_map(self) -> OccupancyMap:
         """What the planner queries: DROAN, with the confident catenary tubes when enabled."""

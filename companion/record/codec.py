@@ -232,6 +232,10 @@ CHANNELS: dict[str, Channel] = {
                     "result": {"type": ["string", "null"], "description": "null: not fused"},
                     "nodes": _INT,
                     "wires": _INT,
+                    "wire_evidence": {
+                        **_BOOL,
+                        "description": "the frame's wire mask was fused (else its stereo only)",
+                    },
                 },
                 "a frame fused into DROAN (4.4.6): the camera pose it was registered at",
             ),
@@ -529,6 +533,7 @@ def encode_map(update: MapUpdate, stamp_s: float) -> list[Encoded]:
         "result": None if update.result is None else update.result.value,
         "nodes": int(update.nodes),
         "wires": int(update.wires),
+        "wire_evidence": bool(update.wire_evidence),
     }
     if update.world_from_camera is not None:
         payload["pose"] = _pose_json(update.world_from_camera)
@@ -747,6 +752,7 @@ def decode_map(p: dict[str, Any]) -> MapUpdate:
         None if p.get("result") is None else InsertResult(p["result"]),
         int(p["nodes"]),
         int(p["wires"]),
+        bool(p.get("wire_evidence", True)),  # recordings from before the field: always
     )
 
 

@@ -302,7 +302,7 @@ class Replayer:
             self.result.unmatched += 1
             return
         pose = self._registration(perception, recorded)
-        replayed = self.builder.insert(perception, pose)
+        replayed = self.builder.insert(perception, pose, recorded.wire_evidence)
         c = _Comparison()
         a, b = recorded.world_from_camera, replayed.world_from_camera
         c.same("registered", a is not None, b is not None)
