@@ -190,8 +190,9 @@ class PlanningParams(BaseModel):
         3.0,
         ge=0,
         le=50,
-        description="within this of the goal, a free and seen straight segment to it is flown "
-        "instead of the library (beyond 4.5: the library cannot settle on a goal), m",
+        description="within this of the goal, a straight segment to it, free and seen up to "
+        "arrival_tolerance_m from it, is flown instead of the library (beyond 4.5: the library "
+        "cannot settle on a goal, nor reach one just above or below the camera's view), m",
     )
     approach_speed_mps: float = Field(
         1.0, gt=0, le=10, description="speed of the final straight approach to the goal, m/s"

@@ -259,11 +259,14 @@ class LocalPlanner:
     ) -> bool:
         """The straight segment to the goal is free, and seen beyond the vehicle's own volume
         around `own_center` (beyond the thesis: the library flies forward and cannot settle on
-        a nearby goal)."""
+        a nearby goal), up to the arrival sphere: inside `arrival_tolerance_m` the vehicle has
+        arrived and holds on the goal. A goal just above or below, where the forward camera
+        cannot look, is reached so rather than circled until the planner gives up."""
         assert self._goal is not None
         p = self._params
         length = float(np.linalg.norm(self._goal - position))
-        arc = np.linspace(0.0, length, max(2, int(np.ceil(length / _APPROACH_STEP_M)) + 1))
+        checked = max(length - p.arrival_tolerance_m, 0.0)
+        arc = np.linspace(0.0, checked, max(2, int(np.ceil(checked / _APPROACH_STEP_M)) + 1))
         points = position + (arc / max(length, 1e-9))[:, None] * (self._goal - position)
         answer = occupancy_map.query(points)
         own = (arc < p.own_volume_m) & (

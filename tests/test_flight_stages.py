@@ -189,6 +189,14 @@ def test_the_approach_is_not_flown_through_an_obstacle_or_unseen_space() -> None
     assert Pilot(PlanningParams()).plan(0.0, start, blocked, goal, False).label != "approach"
     unseen = SyntheticOccupancyMap()  # nothing observed
     assert Pilot(PlanningParams()).plan(0.0, start, unseen, goal, False).label != "approach"
+    # a goal 0.57 m straight above, where the forward camera cannot look: the segment to the
+    # arrival sphere (0.5 m) lies in the vehicle's own volume, so it is flown, not circled
+    below = _state([10.0, 0.0, -2.43])
+    up = Pilot(PlanningParams()).plan(0.0, below, unseen, goal, False)
+    assert up.label == "approach"
+    np.testing.assert_allclose(up.reference.positions_ned_m[-1], goal)
+    far_below = _state([10.0, 0.0, -2.0])  # 1 m under it: half of the way is unseen
+    assert Pilot(PlanningParams()).plan(0.0, far_below, unseen, goal, False).label != "approach"
 
 
 async def test_a_loop_of_timeouts_can_always_be_cancelled() -> None:
