@@ -195,7 +195,7 @@ def test_the_approach_is_not_flown_through_an_obstacle_or_unseen_space() -> None
     up = Pilot(PlanningParams()).plan(0.0, below, unseen, goal, False)
     assert up.label == "approach"
     np.testing.assert_allclose(up.reference.positions_ned_m[-1], goal)
-    far_below = _state([10.0, 0.0, -2.0])  # 1 m under it: half of the way is unseen
+    far_below = _state([10.0, 0.0, -2.0])  # 1 m under: the checked 0.5 m leaves its own volume
     assert Pilot(PlanningParams()).plan(0.0, far_below, unseen, goal, False).label != "approach"
 
 
