@@ -209,8 +209,8 @@ def test_every_fault_in_turn_is_survived_and_handled_in_time() -> None:
     # ... and moves on (> 0.5 m before the next fault) after at least 9 of the 10: all 10 in
     # each of 7 local flights of the hazy field, 2 of them with computation charged twice
     # over (`sim.compute_scale = 2`), 0.55-15 m moved (on the clear field, whose tree line the
-    # small camera reads as a wire, CI saw 8; without the climb's wire masks 10 in 2 of 2, but
-    # 0.6-1.3 m in some windows)
+    # small camera reads as a wire, CI saw 8; without the takeoff climb's wire masks 10 in 2 of
+    # 2, but 0.6-1.3 m in some windows)
     moved_on = [r["name"] for r in summary["faults"] if r["recovered"]]
     assert len(moved_on) >= len(MATRIX) - 1, summary["faults"]
     assert summary["collisions"] == 0

@@ -34,6 +34,9 @@ def test_a_recorded_flight_replays_exactly(tmp_path: Path) -> None:
         update={
             "record": settings.record.model_copy(update={"path": str(tmp_path / "f-%Y.mcap")}),
             "sim": settings.sim.model_copy(update={"timeout_s": 15.0}),
+            "flight": settings.flight.model_copy(
+                update={"wires_during_takeoff_and_landing": False}
+            ),
         }
     )
     record = asyncio.run(fly_world(settings, load_world(DATA / "hop.toml"), addons=[_Hook()]))

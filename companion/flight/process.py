@@ -10,10 +10,10 @@ mission.rate_hz -> [mission: state machine] -> arm / takeoff / offboard / land o
 ```
 
 Each stage takes the newest message of its input topic (`companion.topics.Bus`): a busy
-stage skips frames rather than queue them, and the skipped ones are counted. Frames taken
-while the mission is not airborne (on the ground, the takeoff climb, landing) give the map
-their stereo alone: a vertical sweep turns each wire's prior into a fan (see
-`flight.wires_during_takeoff_and_landing`). The CNN runs on
+stage skips frames rather than queue them, and the skipped ones are counted. With
+`flight.wires_during_takeoff_and_landing` off, frames taken while the mission is not airborne
+(on the ground, the takeoff climb, landing) give the map their stereo alone: a vertical
+sweep turns each wire's prior into a fan. The CNN runs on
 a worker thread of its own; map inserts and planner queries share one, so the map never
 changes under a query. Every message carries the stamp of the exposure it derives from: a
 plan built on a map whose newest frame is older than `flight.perception_max_age_s` is not
