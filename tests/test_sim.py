@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from companion.cli import app
-from companion.cli.sim import sweep_summary, verdict_text
+from companion.cli.sim import sweep_specs, sweep_summary, verdict_text
 
 REPO = Path(__file__).resolve().parents[1]
 PX4_SITL = REPO.parent / "shared" / "px4-sitl"
@@ -111,6 +111,14 @@ def test_the_sweep_summary_counts_failures_and_clearances() -> None:
     assert summary["failures"] == [
         {"scenario": "b", "seed": 1, "collisions": 1, "mission_state": None, "failure": "x"}
     ]
+
+
+def test_a_sweep_can_extend_an_earlier_one_by_its_first_seed() -> None:
+    specs = sweep_specs(["a", "b"], range(3, 5), Path("s.toml"), 1)
+    assert [(s.scenario, s.seed) for s in specs] == [("a", 3), ("a", 4), ("b", 3), ("b", 4)]
+    assert {(s.config, s.inference_threads, s.world_file) for s in specs} == {("s.toml", 1, None)}
+    result = CliRunner().invoke(app, ["sweep", "--first-seed", "-1", "--json"])
+    assert result.exit_code == 2 and "--first-seed" in result.output
 
 
 @pytest.fixture()

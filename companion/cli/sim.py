@@ -311,11 +311,31 @@ def sweep_summary(results: list[dict]) -> dict:
     }
 
 
+def sweep_specs(
+    names: list[str], seeds: range, config: Path | None, threads: int | None
+) -> list[FlightSpec]:
+    """One flight of each scenario in `names` with each seed, scenario by scenario."""
+    settings = str(config) if config else None
+    return [
+        FlightSpec(name, seed, None, settings, inference_threads=threads)
+        for name in names
+        for seed in seeds
+    ]
+
+
 def sweep(
     scenarios: Annotated[
         str, typer.Option("--scenarios", help="comma-separated built-in scenarios")
     ] = "ladder-wire,ladder-wire-left,ladder-wire-right,stacked-wires,power-line-corridor,random",
-    seeds: Annotated[int, typer.Option("--seeds", min=1, help="seeds 0..N-1 of each")] = 5,
+    seeds: Annotated[
+        int, typer.Option("--seeds", min=1, help="how many seeds of each: F..F+N-1")
+    ] = 5,
+    first_seed: Annotated[
+        int,
+        typer.Option(
+            "--first-seed", min=0, help="the first seed F (extend an earlier sweep of 0..F-1)"
+        ),
+    ] = 0,
     jobs: Annotated[int, typer.Option("--jobs", min=1, help="flights in parallel")] = 2,
     address: Annotated[
         str | None,
@@ -337,11 +357,7 @@ def sweep(
         raise typer.BadParameter(f"unknown scenarios {unknown}; one of {', '.join(SCENARIOS)}")
     # the flights share this machine's cores: each CNN gets its share of them, not all
     threads = None if address else max(1, (os.cpu_count() or 1) // jobs)
-    specs = [
-        FlightSpec(name, seed, None, str(config) if config else None, inference_threads=threads)
-        for name in names
-        for seed in range(seeds)
-    ]
+    specs = sweep_specs(names, range(first_seed, first_seed + seeds), config, threads)
     results = _run_on_ray(specs, address) if address else _run_locally(specs, jobs)
     summary = sweep_summary(results)
     if json_output:
