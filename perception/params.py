@@ -28,6 +28,18 @@ class PerceptionParams(BaseModel):
         "photographs, `wireavoid calibrate-threshold`) instead of confidence_threshold; "
         "weights without one use confidence_threshold",
     )
+    no_wire_below: float = Field(
+        1.0,
+        gt=0,
+        le=1,
+        description="a pixel is evidence that no wire is there only below this wire "
+        "probability; at or above it, but under the mask threshold, the map neither places a "
+        "wire through it nor votes one away (beyond 4.4.5). At the mask threshold or above (the "
+        "default): the thesis' two-way mask. 0.5 (with mapping.wire_free_weight 0.5), measured "
+        "2026-12-04 on stacked-wires seed 5, where the wire level with the camera is scored "
+        "0.5-0.95 in most frames: 1 strike in 5 flights against 3 in 6, none reaching the goal "
+        "in 120 s; sweep seeds 0-3 14 of 24 against 15, no strike either way",
+    )
     canny_low_threshold: float = Field(
         50.0, ge=0, le=1000, description="Canny hysteresis low threshold of RGBLE's E map (2.3.4)"
     )

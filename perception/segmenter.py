@@ -163,3 +163,11 @@ class WireSegmenter:
     def mask(self, image: np.ndarray, channel_order: str = "bgr") -> np.ndarray:
         """(H, W) bool wire-obstacle mask: thresholded and speckle-filtered probability (4.4.1)."""
         return self.mask_of(self.probability(image, channel_order))
+
+    def possible_of(self, prob: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """(H, W) bool: the pixels this model does not rule out as wire, `mask` (`mask_of`
+        `prob`) and those at or above `params.no_wire_below` (speckle-filtered like the mask):
+        beyond 4.4.5, only the others are evidence that no wire is there."""
+        if self.params.no_wire_below >= self.mask_threshold:
+            return mask  # the thesis' two-way mask: nothing undecided
+        return wire_mask(prob, self.params, self.params.no_wire_below) | mask

@@ -30,6 +30,9 @@ def random_graph(rng: np.random.Generator):
     wire_front = np.where(rng.random(len(images)) < 0.3, rng.uniform(2.0, 10.0, len(images)), 0)
     images[wire_known, 4] = wire_front[wire_known]
     images[wire_known, 5] = np.maximum(wire_front[wire_known] - 8.0, 0.0)
+    possible = wire_known & (rng.random(len(images)) < 0.5)  # wire-or-undecided slabs
+    images[possible, 6] = np.maximum(wire_front[possible], rng.uniform(2.0, 10.0, possible.sum()))
+    images[possible, 7] = np.maximum(images[possible, 6] - 8.0, 0.0)
     intrinsics = np.array([[10.0, 0.0, W / 2], [0.0, 10.0, H / 2], [0.0, 0.0, 1.0]])
     north = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])  # camera from NED
     projection = np.stack([intrinsics @ north] * NODES).astype(np.float32)
@@ -53,7 +56,9 @@ def numpy_reference(points, projection, offset, slots, images):
     stereo, observed = stereo_occupancy_cost(
         d, *np.moveaxis(cells[..., :4], -1, 0), SIGMA, FREE, OCCLUDED
     )
-    wire = wire_occupancy_cost(d, cells[..., 4], cells[..., 5], WIRE_FREE, WIRE_NEAR)
+    wire = wire_occupancy_cost(
+        d, cells[..., 4], cells[..., 5], WIRE_FREE, WIRE_NEAR, cells[..., 6], cells[..., 7]
+    )
     return occupancy_measure(stereo), occupancy_measure(wire), observed.any(axis=0)
 
 

@@ -89,3 +89,42 @@ def test_single_observation_is_a_slab_and_fusion_localises_three_wires() -> None
     assert not column(thesis, [7.5, 10.5]).any()
     assert not thesis.query(behind).collision.any()
     assert occupied_fraction(thesis) < 0.95 * occupied_fraction(single)
+
+
+def passing_map(views: int, possible: bool) -> tuple[DroanMap, np.ndarray]:
+    """`views` views flown level with a wire 10 m ahead, 0.5 m apart (a wire no view can
+    triangulate): the first two detect it, with a false wire about 1.1 m higher at its
+    distance; the views after them miss both, their CNN (`possible`) still scoring the true
+    wire undecided. Returns the map and the points (on the wire, on the false wire)."""
+    params = MappingParams(
+        robot_radius_m=0.3, camera_width_px=320, camera_height_px=240, wire_free_weight=0.5
+    )  # the thesis' weight
+    rig = stereo_rig_from_params(params.camera)
+    height = 6.0
+    ends = [WIRE_NORTH_M, -40, -height], [WIRE_NORTH_M, 40, -height]
+    camera = SimulatedStereoCamera(
+        World(wires=[catenary_wire(*ends, 0.0, 0.02)]), rig,
+        body_from_camera_from_params(params.camera), CameraSimParams(), colour_downscale=2,
+    )  # fmt: skip
+    droan = DroanMap(rig, params)
+    for i in range(views):
+        frame = camera.render(0.1 * i, Pose.from_yaw_pitch_roll(0, 0, 0, [0.5 * i, 0, -height]))
+        if i < 2:  # 12 rows up at 110 px focal length: 0.11 rad
+            mask = frame.wire_mask | np.roll(frame.wire_mask, -12, axis=0)
+            droan.insert(frame.stamp_s, frame.world_from_camera, None, mask)
+        else:
+            missed = np.zeros_like(frame.wire_mask)
+            undecided = frame.wire_mask if possible else None
+            droan.insert(frame.stamp_s, frame.world_from_camera, None, missed, undecided)
+    return droan, np.array([[WIRE_NORTH_M, 0, -height], [WIRE_NORTH_M, 0, -height - 1.1]])
+
+
+def test_a_wire_the_cnn_still_doubts_is_not_voted_away() -> None:
+    seen, points = passing_map(2, possible=False)
+    assert seen.query(points).collision.tolist() == [True, True]
+    # the thesis' two-way mask: eight views that miss it erase a wire seen twice
+    thesis, _ = passing_map(10, possible=False)
+    assert thesis.query(points).collision.tolist() == [False, False]
+    # views whose CNN scores the wire undecided abstain there, and still carve the false wire
+    doubting, _ = passing_map(10, possible=True)
+    assert doubting.query(points).collision.tolist() == [True, False]

@@ -66,6 +66,23 @@ def test_probability_finds_the_dark_wire_and_mask_drops_the_speck():
     assert keep_specks.mask(image)[5:7, 5:7].all()
 
 
+def test_possible_mask_holds_what_the_model_does_not_rule_out():
+    prob = np.zeros((60, 80), np.float32)
+    prob[10], prob[30], prob[50] = 0.99, 0.7, 0.3  # a wire, an undecided line, no wire
+    prob[40:42, 5:7] = 0.7  # an undecided speck: speckle-filtered like the mask
+    seg = WireSegmenter.from_model(
+        darkness_model(), runtime="torch", params=PerceptionParams(no_wire_below=0.5)
+    )
+    mask = seg.mask_of(prob)
+    possible = seg.possible_of(prob, mask)
+    assert np.flatnonzero(mask.any(axis=1)).tolist() == [10]
+    assert np.flatnonzero(possible.any(axis=1)).tolist() == [10, 30]
+    two_way = WireSegmenter.from_model(
+        darkness_model(), runtime="torch"
+    )  # the default, at the mask threshold or above: the thesis' mask, nothing undecided
+    np.testing.assert_array_equal(two_way.possible_of(prob, two_way.mask_of(prob)), mask)
+
+
 def test_channel_order_and_batch_are_consistent():
     torch.manual_seed(0)
     seg = WireSegmenter.from_model(build_model("k4-d2-k2"), runtime="torch")

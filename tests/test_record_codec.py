@@ -62,7 +62,14 @@ def test_a_camera_frame_and_its_mask_come_back_exactly() -> None:
     mask = rng.random((24, 32)) > 0.8
     (mask_msg,) = _roundtrip(codec.encode_perception(Perception(1.5, 77, mask, disparity), 1.6))
     assert mask_msg["wire_pixels"] == int(mask.sum())
-    np.testing.assert_array_equal(codec.decode_perception(mask_msg, None).wire_mask, mask)
+    decoded = codec.decode_perception(mask_msg, None)
+    np.testing.assert_array_equal(decoded.wire_mask, mask)
+    np.testing.assert_array_equal(decoded.possible_mask, mask)  # none given: the wire mask
+    possible = mask | (rng.random((24, 32)) > 0.5)
+    (both,) = _roundtrip(codec.encode_perception(Perception(1.5, 77, mask, None, possible), 1.6))
+    decoded = codec.decode_perception(both, None)
+    np.testing.assert_array_equal(decoded.wire_mask, mask)
+    np.testing.assert_array_equal(decoded.possible_mask, possible)
     (empty,) = _roundtrip(codec.encode_perception(Perception(1.5, 78, None, disparity), 1.6))
     assert codec.decode_perception(empty, None).wire_mask is None
 

@@ -92,7 +92,10 @@ class MapBuilder:
             catenary.add_frame(perception.stamp_s, pose, mask)
             mask = catenary.mask_for_droan(pose, mask)
             wires = len(catenary.obstacles())
-        result = self.droan.insert(perception.stamp_s, pose, perception.disparity_px, mask)
+        possible = None if mask is None else perception.possible_mask
+        result = self.droan.insert(
+            perception.stamp_s, pose, perception.disparity_px, mask, possible
+        )
         self.newest_frame_s = max(self.newest_frame_s, perception.stamp_s)
         return MapUpdate(
             perception.stamp_s, perception.sequence, pose, result, len(self.droan), wires,

@@ -17,12 +17,16 @@ class Perception:
     wire_mask: `(h, w) bool` on the colour image's pixels (thresholded at the confidence
         threshold and speckle-filtered, 4.4.1), or None when the frame had no colour image.
     disparity_px: the frame's disparity, passed through to the map (or None).
+    possible_mask: `(h, w) bool`, the pixels the CNN does not rule out as wire (probability
+        at or above `perception.no_wire_below`; contains `wire_mask`), or None: then every
+        pixel outside `wire_mask` is evidence of no wire (the thesis' mask, 4.4.5).
     """
 
     stamp_s: float
     sequence: int
     wire_mask: np.ndarray | None
     disparity_px: np.ndarray | None
+    possible_mask: np.ndarray | None = None
 
 
 class WireDetector:
@@ -33,5 +37,9 @@ class WireDetector:
 
     def __call__(self, frame: CameraFrame) -> Perception:
         """The perception of `frame`."""
-        mask = None if frame.image_bgr is None else self._segmenter.mask(frame.image_bgr, "bgr")
-        return Perception(frame.stamp_s, frame.sequence, mask, frame.disparity_px)
+        if frame.image_bgr is None:
+            return Perception(frame.stamp_s, frame.sequence, None, frame.disparity_px)
+        prob = self._segmenter.probability(frame.image_bgr, "bgr")
+        mask = self._segmenter.mask_of(prob)
+        possible = self._segmenter.possible_of(prob, mask)
+        return Perception(frame.stamp_s, frame.sequence, mask, frame.disparity_px, possible)

@@ -187,7 +187,8 @@ CHANNELS: dict[str, Channel] = {
             _schema(
                 "foxglove.CompressedImage",
                 {**_IMAGE, "has_mask": _BOOL, "wire_pixels": _INT},
-                "the CNN's wire mask (thesis 4.4.1), PNG 0/255 on the colour image's pixels",
+                "the CNN's wire mask (thesis 4.4.1) on the colour image's pixels, PNG: 255 wire, "
+                "128 not ruled out (probability >= perception.no_wire_below), 0 no wire",
             ),
         ),
         Channel(
@@ -473,13 +474,15 @@ def encode_camera(
 
 
 def encode_perception(perception: Perception, stamp_s: float) -> list[Encoded]:
-    """The wire mask as a 0/255 PNG (the disparity is the camera frame's)."""
+    """The wire mask as a PNG, 255 on wire pixels, 128 on the others of the possible mask,
+    0 elsewhere (the disparity is the camera frame's)."""
     mask = perception.wire_mask
     payload = _image_fields(perception.stamp_s, perception.sequence, CAMERA_FRAME_ID)
     if mask is None:
         payload.update(data="", format="png", has_mask=False, wire_pixels=0)
     else:
-        image = np.asarray(mask, dtype=bool).astype(np.uint8) * 255
+        possible = mask if perception.possible_mask is None else perception.possible_mask
+        image = np.where(mask, 255, np.where(possible, 128, 0)).astype(np.uint8)
         payload.update(
             data=_b64(_png(image)),
             format="png",
@@ -709,11 +712,15 @@ def decode_camera(image: dict[str, Any] | None, disparity: dict[str, Any] | None
 
 
 def decode_perception(payload: dict[str, Any], disparity_px: np.ndarray | None) -> Perception:
-    """A `Perception` from its `/perception/wire_mask` message and its frame's disparity."""
-    mask = None
+    """A `Perception` from its `/perception/wire_mask` message and its frame's disparity
+    (recordings from before the possible mask: it is the wire mask, the same map)."""
+    mask = possible = None
     if payload.get("has_mask"):
-        mask = image_from_json(payload, cv2.IMREAD_GRAYSCALE) > 127
-    return Perception(_f(payload["stamp_s"]), int(payload["sequence"]), mask, disparity_px)
+        image = image_from_json(payload, cv2.IMREAD_GRAYSCALE)
+        mask, possible = image > 191, image > 63
+    return Perception(
+        _f(payload["stamp_s"]), int(payload["sequence"]), mask, disparity_px, possible
+    )
 
 
 def decode_vehicle(p: dict[str, Any]) -> TelemetrySnapshot:

@@ -69,9 +69,15 @@ def wire_occupancy_cost(
     back_px: np.ndarray,
     free_weight: float,
     near_px: float,
+    possible_front_px: np.ndarray | None = None,
+    possible_back_px: np.ndarray | None = None,
 ) -> np.ndarray:
     """Wire cost: C(d) with sigma = 0 (= 1) inside the wire slab [d_b, d_f], -free_weight
     elsewhere in view (4.4.5 note); 0 where the node has no wire observation (front < 0).
+
+    Beyond the thesis: 0 also inside the slab of the pixels the detector did not rule out as
+    wire (`possible_front_px`/`possible_back_px`, front <= 0 where none; `DroanMap.insert`'s
+    `possible_mask`): a view whose CNN scored a wire 0.5-0.95 there does not vote it away.
 
     Beyond the thesis: 0 also nearer than the slab's front `near_px` (the near prior, 4.4.3,
     C-space expanded). The prior places a seen wire beyond 4 m so that it is avoided early,
@@ -80,6 +86,12 @@ def wire_occupancy_cost(
     """
     known = (front_px >= 0) & (disparity_px <= near_px)
     occupied = known & (disparity_px <= front_px) & (disparity_px >= back_px) & (front_px > 0)
+    if possible_front_px is not None and possible_back_px is not None:
+        known &= ~(
+            (possible_front_px > 0)
+            & (disparity_px <= possible_front_px)
+            & (disparity_px >= possible_back_px)
+        )
     return np.where(occupied, np.float32(1), np.where(known, -np.float32(free_weight), 0.0))
 
 
@@ -114,7 +126,7 @@ def summed_costs(
     counts only if the point is in the node's view: depth in (min_depth_m, max_range_m],
     inside the image. Node s projects with `projection[s]` (K R_cw) and `offset[s]` (K t_cw);
     its pixels are rows `s * height * width + v * width + u` of `images`, channels (front,
-    back, own_front, own_back, wire_front, wire_back).
+    back, own_front, own_back, wire_front, wire_back, possible_front, possible_back).
     """
     n = points.shape[0]
     stereo_sum = np.zeros(n, np.float32)
@@ -160,6 +172,6 @@ def summed_costs(
             if wire_front >= zero and d <= wire_near_px:  # wire_occupancy_cost
                 if wire_front > zero and images[row, 5] <= d <= wire_front:
                     wire_sum[j] += one
-                else:
+                elif not (images[row, 6] > zero and images[row, 7] <= d <= images[row, 6]):
                     wire_sum[j] -= wire_free_weight
     return np.maximum(stereo_sum, zero), np.maximum(wire_sum, zero), seen

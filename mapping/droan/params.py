@@ -47,8 +47,9 @@ class MappingParams(BaseModel):
         description="weight of a view's no-wire evidence against its wire evidence (+1) "
         "(4.4.5): a point stays occupied while over w/(1+w) of the views that see it place it "
         "on a wire ray. The thesis' 0.5 (1/3) let a wire detected in every other frame against "
-        "a tree line vanish (a strike at 0.25 m); 0.25 keeps it down to 1/5. Above 1 carves "
-        "the slabs into the wires' positions",
+        "a tree line vanish (a strike at 0.25 m); 0.25 keeps it down to 1/5. Views whose CNN "
+        "did not rule a wire out abstain (perception.no_wire_below). Above 1 carves the slabs "
+        "into the wires' positions",
     )
     occluded_discount: float = Field(
         0.0,

@@ -2,9 +2,10 @@
 (thesis 4.4.6 with 4.4.3-4.4.5). Implements `mapping.query.OccupancyMap`.
 
 Each node holds the camera pose `world_from_camera` (NED from camera frame, see
-`geometry.pose`), the image timestamp, and six expanded images on the expansion grid (stereo
-front/back and own-return front/back, wire front/back; see `mapping.droan.expansion`). Node images
-live in one preallocated `(max_nodes, Hc, Wc, 6) float32` array, so a query projects all
+`geometry.pose`), the image timestamp, and eight expanded images on the expansion grid (stereo
+front/back and own-return front/back, wire front/back, possible-wire front/back; see
+`mapping.droan.expansion`). Node images live in one preallocated `(max_nodes, Hc, Wc, 8) float32`
+array, so a query projects all
 points into each node and costs it in one compiled pass (`mapping.droan.occupancy.summed_costs`); a
 large batch is split across `query_threads` threads (the kernel releases the GIL), each
 point's answer unchanged.
@@ -66,7 +67,7 @@ class DroanMap:
         self.grid_camera = self.expander.grid_camera
         h, w = self.grid_camera.shape
         n = params.max_nodes
-        # 8 channels (6 used): a pixel's 32-byte row never straddles a cache line
+        # 8 channels: a pixel's 32-byte row never straddles a cache line
         self._images = np.full((n * h * w, 8), -1.0, dtype=np.float32)
         self._projection = np.zeros((n, 3, 3), dtype=np.float32)  # K_grid @ R_cw
         self._offset = np.zeros((n, 3), dtype=np.float32)  # K_grid @ t_cw
@@ -119,6 +120,7 @@ class DroanMap:
         world_from_camera: Pose,
         disparity_px: np.ndarray | None = None,
         wire_mask: np.ndarray | None = None,
+        possible_mask: np.ndarray | None = None,
     ) -> InsertResult:
         """Fuse one frame taken at `stamp_s` (s) from `world_from_camera` (NED from camera).
 
@@ -126,6 +128,10 @@ class DroanMap:
             None when only a wire mask is available.
         wire_mask: `(H, W) bool` wire pixels registered to the disparity camera, or None when
             no wire detection ran for this frame (no wire evidence, not "no wire").
+        possible_mask: `(H, W) bool` like `wire_mask`, the pixels the detector does not rule
+            out as wire (a superset of it): where only its C-space expansion reaches, the node
+            votes neither for a wire nor against one. None: every pixel outside the wire
+            mask's expansion is no-wire evidence (4.4.5).
         """
         if disparity_px is None and wire_mask is None:
             raise ValueError("a frame needs a disparity image, a wire mask or both")
@@ -141,7 +147,7 @@ class DroanMap:
             slot = min(set(range(len(self._slots))) - set(self._order))
         else:
             slot = self._order.pop(0)
-        self._write(slot, world_from_camera, disparity_px, wire_mask)
+        self._write(slot, world_from_camera, disparity_px, wire_mask, possible_mask)
         self._slots[slot] = DroanNode(
             float(stamp_s),
             world_from_camera,
@@ -159,6 +165,7 @@ class DroanMap:
         world_from_camera: Pose,
         disparity_px: np.ndarray | None,
         wire_mask: np.ndarray | None,
+        possible_mask: np.ndarray | None,
     ) -> None:
         images = self._node_view(slot)
         images.fill(-1.0)
@@ -169,6 +176,9 @@ class DroanMap:
         if wire_mask is not None:
             wire = self.expander.expand_wire(wire_mask)
             images[..., 4], images[..., 5] = wire.front_px, wire.back_px
+            if possible_mask is not None and (possible_mask & ~wire_mask).any():
+                possible = self.expander.expand_wire(possible_mask | wire_mask)
+                images[..., 6], images[..., 7] = possible.front_px, possible.back_px
         camera_from_world = world_from_camera.inverse()
         k = self.grid_camera.intrinsic_matrix()
         self._projection[slot] = k @ camera_from_world.rotation
