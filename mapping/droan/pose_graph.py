@@ -4,11 +4,10 @@
 Each node holds the camera pose `world_from_camera` (NED from camera frame, see
 `geometry.pose`), the image timestamp, and eight expanded images on the expansion grid (stereo
 front/back and own-return front/back, wire front/back, possible-wire front/back; see
-`mapping.droan.expansion`). Node images live in one preallocated `(max_nodes, Hc, Wc, 8) float32`
-array, so a query projects all
-points into each node and costs it in one compiled pass (`mapping.droan.occupancy.summed_costs`); a
-large batch is split across `query_threads` threads (the kernel releases the GIL), each
-point's answer unchanged.
+`mapping.droan.expansion`). Node images live in one preallocated `(max_nodes, Hc, Wc, 8)
+float32` array, so a query projects all points into each node and costs it in one compiled
+pass (`mapping.droan.occupancy.summed_costs`); a large batch is split across `query_threads`
+threads (the kernel releases the GIL), each point's answer unchanged.
 
 Keyframes (4.4.6, 3.4.2): a frame becomes a new node when the camera moved at least
 `keyframe_translation_m` or turned at least `keyframe_rotation_deg` since the newest keyframe;
