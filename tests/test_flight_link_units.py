@@ -1,12 +1,17 @@
-"""Unit tests of the flight link's pure parts: rate keeper, watchdog, telemetry cache, setpoints."""
+"""Unit tests of the flight link's pure parts: rate keeper, watchdog, telemetry cache, setpoints,
+MAVSDK calls in flight."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import math
+import threading
 
 import numpy as np
 import pytest
 
+from companion.link.calls import MavsdkCalls, returned_within
 from companion.link.params import LinkParams
 from companion.link.setpoints import SetpointSource
 from companion.link.telemetry import FlightMode, Health, LandedState, TelemetryCache
@@ -209,3 +214,58 @@ def test_link_params_enforce_setpoint_rate_floor():
     with pytest.raises(ValueError):
         LinkParams(setpoint_rate_hz=10.0)
     assert LinkParams().setpoint_max_age_s == 0.3
+
+
+async def test_a_cancelled_mavsdk_call_is_waited_for_until_its_thread_returns():
+    """MAVSDK runs each call in a worker thread; cancelling the caller leaves the thread in C,
+    so `drained` counts it until it returns, and only then may the plugin be destroyed."""
+    calls = MavsdkCalls()
+    release = threading.Event()
+    loop = asyncio.get_running_loop()
+
+    async def blocking_call() -> str:  # MAVSDK's asyncio plugins: run_in_executor(None, ...)
+        return await loop.run_in_executor(None, lambda: release.wait(10.0) and "acked")
+
+    caller = asyncio.create_task(calls.call(blocking_call()))
+    await asyncio.sleep(0.05)
+    caller.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await caller
+    assert caller.cancelled()
+    assert calls.running == 1
+    assert await calls.drained(0.1) == 1  # still in its thread
+    release.set()
+    assert await calls.drained(2.0) == 0
+    assert calls.running == 0
+
+
+async def test_a_mavsdk_call_raises_to_its_caller():
+    calls = MavsdkCalls()
+
+    async def refused() -> None:
+        raise RuntimeError("COMMAND_DENIED")
+
+    with pytest.raises(RuntimeError, match="COMMAND_DENIED"):
+        await calls.call(refused())
+    assert calls.running == 0
+
+
+async def test_a_mavsdk_destroy_that_never_returns_leaves_the_loop_running():
+    """MAVSDK's destroy blocks in C; one that hangs must not freeze the flight process."""
+    stuck = threading.Event()
+    ticks = 0
+
+    async def loop_ticks() -> None:
+        nonlocal ticks
+        while True:
+            await asyncio.sleep(0.01)
+            ticks += 1
+
+    ticker = asyncio.create_task(loop_ticks())
+    try:
+        assert not await returned_within(lambda: stuck.wait(5.0), 0.3, "stuck-destroy")
+        assert ticks >= 10  # the loop went on while the destroy hung
+        assert await returned_within(lambda: None, 1.0, "quick-destroy")
+    finally:
+        ticker.cancel()
+        stuck.set()

@@ -11,9 +11,15 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
+from companion.link.calls import MavsdkCalls
 
-async def read_parameters(system: Any, names: Iterable[str]) -> dict[str, float | int | None]:
-    """{name: value} of a connected MAVSDK `System`; None for a parameter it does not have."""
+
+async def read_parameters(
+    system: Any, names: Iterable[str], calls: MavsdkCalls, drain_timeout_s: float
+) -> dict[str, float | int | None]:
+    """{name: value} of a connected MAVSDK `System`; None for a parameter it does not have.
+    The reads go through `calls`; the param plugin is destroyed once they have returned (up to
+    `drain_timeout_s`)."""
     from mavsdk.asyncio.plugins.param import ParamAsync, ParamError, ParamResult
 
     param = ParamAsync(system)
@@ -21,15 +27,16 @@ async def read_parameters(system: Any, names: Iterable[str]) -> dict[str, float 
     try:
         for name in names:
             try:
-                values[name] = float(await param.get_param_float(name))
+                values[name] = float(await calls.call(param.get_param_float(name)))
             except ParamError as e:
                 if e.result is not ParamResult.WRONG_TYPE:
                     values[name] = None
                     continue
                 try:
-                    values[name] = int(await param.get_param_int(name))
+                    values[name] = int(await calls.call(param.get_param_int(name)))
                 except ParamError:
                     values[name] = None
     finally:
+        await calls.drained(drain_timeout_s)
         param.destroy()
     return values

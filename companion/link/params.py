@@ -93,6 +93,13 @@ class LinkParams(BaseModel):
     reconnect_interval_s: float = Field(
         2.0, gt=0, le=60, description="pause between attempts to rebuild a lost link, s"
     )
+    call_drain_timeout_s: float = Field(
+        5.0,
+        gt=0,
+        le=60,
+        description="before MAVSDK is destroyed (close, rebuild), wait this long for its calls "
+        "still running in worker threads to return (companion.link.calls), s",
+    )
     reconnect_max_attempts: int = Field(
         0, ge=0, description="link rebuild attempts before giving up; 0 means never give up"
     )

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from companion.clock import Clock, WallClock, wait_or_timeout
+from companion.link.calls import MavsdkCalls, returned_within
 from companion.link.events import arming_report_detail, event_detail
 from companion.link.parameters import read_parameters
 from companion.link.params import LinkParams
@@ -154,6 +155,7 @@ class VehicleLink:
         self._events: Any = None
         self._arming_report = ""
         self._connection_tasks: set[asyncio.Task[None]] = set()
+        self._calls = MavsdkCalls()
         self._supervisor: asyncio.Task[None] | None = None
         self._streamer: asyncio.Task[None] | None = None
         self._stream_keeper: RateKeeper | None = None
@@ -218,7 +220,7 @@ class VehicleLink:
         config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
         self._mavsdk = Mavsdk(config)
         try:
-            await self._mavsdk.add_any_connection(self.params.connection_url)
+            await self._calls.call(self._mavsdk.add_any_connection(self.params.connection_url))
             system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
         except MavsdkError as e:
             await self._close_connection()
@@ -246,15 +248,31 @@ class VehicleLink:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         self._connection_tasks.clear()
-        for plugin in (self._action, self._offboard, self._telemetry, self._events):
-            if plugin is not None:
-                with contextlib.suppress(Exception):
-                    plugin.destroy()
+        still_running = await self._calls.drained(self.params.call_drain_timeout_s)
+        if still_running:
+            self._error(
+                f"{still_running} MAVSDK call(s) still running after "
+                f"{self.params.call_drain_timeout_s:.1f} s; destroying MAVSDK under them"
+            )
+        plugins = [self._action, self._offboard, self._telemetry, self._events]
+        mavsdk = self._mavsdk
         self._action = self._offboard = self._telemetry = self._events = self._system = None
-        if self._mavsdk is not None:
-            with contextlib.suppress(Exception):
-                self._mavsdk.destroy()
-            self._mavsdk = None
+        self._mavsdk = None
+        if mavsdk is None:
+            return
+
+        def release() -> None:
+            for plugin in plugins:
+                if plugin is not None:
+                    with contextlib.suppress(Exception):
+                        plugin.destroy()
+            mavsdk.destroy()
+
+        if not await returned_within(release, self.params.call_drain_timeout_s, "mavsdk-release"):
+            self._error(
+                f"MAVSDK not released within {self.params.call_drain_timeout_s:.1f} s; "
+                "left to its thread"
+            )
 
     def _spawn(self, coro: Coroutine[Any, Any, None], name: str) -> None:
         task = asyncio.create_task(coro, name=name)
@@ -485,7 +503,7 @@ class VehicleLink:
         if self._action is None or self.state is not LinkState.CONNECTED:
             raise LinkDownError(f"{what}: link is {self.state.value}")
         try:
-            return await call()
+            return await self._calls.call(call())
         except Exception as e:
             raise LinkError(f"{what} failed: {e}") from e
 
@@ -577,7 +595,9 @@ class VehicleLink:
         companion.link.px4_limits)."""
         if self._system is None or self.state is not LinkState.CONNECTED:
             raise LinkDownError(f"read parameters: link is {self.state.value}")
-        return await read_parameters(self._system, names)
+        return await read_parameters(
+            self._system, names, self._calls, self.params.call_drain_timeout_s
+        )
 
     async def _leave_offboard(self) -> None:
         """Before another mode: stop streaming and MAVSDK's re-sending, without waiting."""
@@ -776,22 +796,29 @@ class VehicleLink:
         yaw_deg = math.degrees(setpoint.yaw_rad)
         if setpoint.kind is SetpointKind.POSITION:
             n, e, d = (float(x) for x in setpoint.position_ned_m)
-            await self._offboard.set_position_ned(PositionNedYaw(n, e, d, yaw_deg))
+            await self._calls.call(
+                self._offboard.set_position_ned(PositionNedYaw(n, e, d, yaw_deg))
+            )
         elif setpoint.position_ned_m is not None:  # TRAJECTORY, or a BRAKE along its stop
             n, e, d = (float(x) for x in setpoint.position_ned_m)
             vn, ve, vd = (float(x) for x in setpoint.velocity_ned_mps)
             position = PositionNedYaw(n, e, d, yaw_deg)
             velocity = VelocityNedYaw(vn, ve, vd, yaw_deg)
             if setpoint.acceleration_ned_mps2 is None:
-                await self._offboard.set_position_velocity_ned(position, velocity)
+                await self._calls.call(self._offboard.set_position_velocity_ned(position, velocity))
             else:
                 an, ae, ad = (float(x) for x in setpoint.acceleration_ned_mps2)
-                await self._offboard.set_position_velocity_acceleration_ned(
-                    position, velocity, AccelerationNed(an, ae, ad)
+                acceleration = AccelerationNed(an, ae, ad)
+                await self._calls.call(
+                    self._offboard.set_position_velocity_acceleration_ned(
+                        position, velocity, acceleration
+                    )
                 )
         else:  # VELOCITY and a BRAKE without a position fly the velocity
             n, e, d = (float(x) for x in setpoint.velocity_ned_mps)
-            await self._offboard.set_velocity_ned(VelocityNedYaw(n, e, d, yaw_deg))
+            await self._calls.call(
+                self._offboard.set_velocity_ned(VelocityNedYaw(n, e, d, yaw_deg))
+            )
         self.setpoints_sent += 1
 
     # ------------------------------------------------------------------ reporting
