@@ -148,6 +148,7 @@ class VehicleLink:
         self._cache = TelemetryCache()
         self._updated = asyncio.Event()
         self._mavsdk: Any = None
+        self._connection: Any = None  # the handle of MAVSDK's connection to the vehicle
         self._system: Any = None
         self._action: Any = None
         self._offboard: Any = None
@@ -220,7 +221,9 @@ class VehicleLink:
         config = Configuration.create_with_component_type(ComponentType.COMPANION_COMPUTER)
         self._mavsdk = Mavsdk(config)
         try:
-            await self._calls.call(self._mavsdk.add_any_connection(self.params.connection_url))
+            self._connection = await self._calls.call(
+                self._mavsdk.add_any_connection(self.params.connection_url)
+            )
             system = await self._mavsdk.first_autopilot(timeout_s=timeout_s)
         except MavsdkError as e:
             await self._close_connection()
@@ -255,11 +258,20 @@ class VehicleLink:
                 f"{self.params.call_drain_timeout_s:.1f} s; destroying MAVSDK under them"
             )
         plugins = [self._action, self._offboard, self._telemetry, self._events]
-        mavsdk = self._mavsdk
+        mavsdk, connection = self._mavsdk, self._connection
         self._action = self._offboard = self._telemetry = self._events = self._system = None
-        self._mavsdk = None
+        self._mavsdk = self._connection = None
         if mavsdk is None:
             return
+        # Stop receiving before the plugins go: MAVSDK's events plugin deadlocks when destroyed
+        # while its receive thread hands it an event (its deinit waits for that handler, the
+        # handler for the lock deinit holds), and then the process cannot exit either.
+        if connection is not None:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(
+                    self._calls.call(mavsdk.remove_connection(connection)),
+                    self.params.call_drain_timeout_s,
+                )
 
         def release() -> None:
             for plugin in plugins:
