@@ -179,6 +179,15 @@ class PlanningParams(BaseModel):
         4.0, gt=0, le=100, description="how far back along the flown path a rewind goes, m"
     )
     rewind_speed_mps: float = Field(0.8, gt=0, le=5, description="speed of a rewind, m/s")
+    rewind_climb_m: float = Field(
+        1.0,
+        ge=0,
+        le=10,
+        description="height a rewind gains (first, third... rewind) or loses (second...) along "
+        "its length where the map has seen that space free, so the camera sees the obstacle "
+        "from another altitude: a wire level with the camera, on the horizon, is the one the "
+        "CNN misses; 0: rewinds keep the flown path's heights, m",
+    )
     max_rewinds: int = Field(
         3, ge=0, le=50, description="rewinds without progress before the goal is unreachable"
     )

@@ -10,7 +10,8 @@ tracker commanded last and the occupancy map; it returns a `PlannerOutput` whose
 - RECOVERING: stopped and boxed in: hold and rotate in place, re-planning every cycle along
   the nose, until a trajectory is free (4.5) or a full turn found none.
 - REWINDING: no progress for `stuck_timeout_s` or a fruitless full turn: fly back along the
-  recorded flown path (known free) for `rewind_distance_m`, as DROAN's descendants do.
+  recorded flown path (known free) for `rewind_distance_m`, as DROAN's descendants do, the
+  nose towards the goal.
 - ALIGNING: with the goal far off the nose at the start of a goal (or after a rewind), or
   closer than the tightest library turn could reach (no orbiting the goal): brake, then
   rotate towards it before choosing a trajectory.
@@ -143,7 +144,7 @@ class LocalPlanner:
             self._last_progress_s = now_s
             self._state = PlannerState.IDLE  # aligning is allowed again
         elif now_s - self._last_progress_s > p.stuck_timeout_s:
-            return self._rewind_or_give_up(now_s, vehicle, position, distance)
+            return self._rewind_or_give_up(now_s, vehicle, position, distance, occupancy_map)
 
         if (
             self._anchor is not None
@@ -218,7 +219,7 @@ class LocalPlanner:
         self._previous_index = None
         if self._state is PlannerState.RECOVERING:
             if self._turned_rad >= p.recovery_max_turn_rad:
-                return self._rewind_or_give_up(now_s, vehicle, position, distance)
+                return self._rewind_or_give_up(now_s, vehicle, position, distance, occupancy_map)
             return self._keep(now_s, distance, *counts)
         if stopped:
             self._state = PlannerState.RECOVERING
@@ -441,13 +442,25 @@ class LocalPlanner:
         self._last_yaw_rad = yaw_rad
 
     def _rewind_or_give_up(
-        self, now_s: float, vehicle: VehicleState, position: np.ndarray, distance: float
+        self,
+        now_s: float,
+        vehicle: VehicleState,
+        position: np.ndarray,
+        distance: float,
+        occupancy_map: OccupancyMap,
     ) -> PlannerOutput:
-        """Start a rewind along the flown path, or declare the goal unreachable."""
+        """Start a rewind along the flown path, or declare the goal unreachable.
+
+        The rewind backs off facing the goal: the camera keeps the obstacle that stopped the
+        vehicle in view from ever farther off, whose changing rays triangulate the wire depth
+        prior (4.4.3) into place, and no turn away and back (align) is spent; the flown path
+        is known free whichever way the nose points.
+        """
         p = self._params
         path = self._rewind_path(position)
         if self._rewinds >= p.max_rewinds or path is None:
             return self._hold(now_s, vehicle, PlannerState.UNREACHABLE, position, distance)
+        path = self._climbing_rewind(path, occupancy_map)
         self._rewinds += 1
         self._state = PlannerState.REWINDING
         self._previous_index = None
@@ -456,8 +469,15 @@ class LocalPlanner:
         velocities = np.zeros_like(path)
         velocities[:-1] = np.diff(path, axis=0) / np.maximum(np.diff(times), 1e-9)[:, None]
         self._plan_id += 1
+        assert self._goal is not None
+        to_goal = self._goal - position
         self._reference = self._escape = Reference(
-            vehicle.stamp_s, times, path, velocities, self._plan_id
+            vehicle.stamp_s,
+            times,
+            path,
+            velocities,
+            self._plan_id,
+            yaw_target_rad=float(np.arctan2(to_goal[1], to_goal[0])),
         )
         end = path[-1]
         cut = int(np.argmin([np.linalg.norm(c - end) for c in self._crumbs]))
@@ -477,6 +497,40 @@ class LocalPlanner:
             if length >= self._params.rewind_distance_m:
                 break
         return np.array(path) if length >= self._params.breadcrumb_spacing_m else None
+
+    def _climbing_rewind(self, path: np.ndarray, occupancy_map: OccupancyMap) -> np.ndarray:
+        """`path` (P, 3) with its height ramped by `rewind_climb_m` at its end, up on the
+        first, third... rewind and down on the others (the other way, else level, where the
+        map has not seen the ramped path free or it leaves the altitude band).
+
+        Beyond the thesis: the wire depth prior (4.4.3) is triangulated by views from
+        different places, and the views that tell most are from another height: a wire level
+        with the camera lies on the horizon, where the CNN misses it against the tree line.
+        The vehicle leaves the flown path only through space seen free.
+        """
+        p = self._params
+        if p.rewind_climb_m <= 0:
+            return path
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        share = arc / max(arc[-1], 1e-9)
+        samples = max(2, int(np.ceil(arc[-1] / _APPROACH_STEP_M)) + 1)
+        along = np.linspace(0.0, arc[-1], samples)
+        up_first = self._rewinds % 2 == 0  # this rewind is counted after it starts
+        for up in (up_first, not up_first):
+            ramped = path.copy()
+            ramped[:, 2] -= (1.0 if up else -1.0) * p.rewind_climb_m * share
+            heights = -ramped[:, 2]
+            if heights.max() > p.max_altitude_m or heights.min() < p.min_altitude_m:
+                continue
+            ramp = np.column_stack([np.interp(along, arc, ramped[:, i]) for i in range(3)])
+            # and the way back to the flown path that a later rewind takes from its end
+            points = np.vstack([ramp, np.linspace(ramped[-1], path[-1], samples)])
+            answer = occupancy_map.query(points)
+            own = np.linalg.norm(points - path[0], axis=1) < p.own_volume_m
+            unknown = ~np.asarray(answer.seen, bool) & ~own
+            if not (np.asarray(answer.collision, bool).any() or unknown.any()):
+                return ramped
+        return path
 
     def _trajectory_reference(
         self,

@@ -148,7 +148,7 @@ def test_a_corridor_is_flown_inside() -> None:
 def canyon() -> tuple[list[Box], Flight]:
     boxes = box_canyon(-2.0, 10.0, 2.0, 6.0)  # walls, an end wall and a roof: a dead end
     return boxes, fly(
-        SyntheticOccupancyMap(boxes=boxes), np.array([25.0, 0.0, -3.0]), duration_s=80.0
+        SyntheticOccupancyMap(boxes=boxes), np.array([25.0, 0.0, -3.0]), duration_s=120.0
     )
 
 
@@ -194,7 +194,7 @@ def test_stuck_in_the_canyon_rewinds_along_the_flown_path_then_gives_up(canyon) 
     # the dead end is not circled forever: after the rewinds the goal is unreachable
     assert flight.states[-1] is PlannerState.UNREACHABLE
     assert flight.states.count(PlannerState.REWINDING) > 0
-    assert len(flight.outputs) * 0.1 < 80.0
+    assert len(flight.outputs) * 0.1 < 120.0
 
 
 def test_a_goal_inside_an_obstacle_is_reported_unreachable() -> None:
@@ -270,7 +270,52 @@ def test_no_progress_for_the_stuck_timeout_starts_a_rewind() -> None:
     back = output.reference.positions_ned_m
     np.testing.assert_allclose(back[0], position)
     assert back[-1][0] == pytest.approx(position[0] - PARAMS.rewind_distance_m, abs=0.5)
-    np.testing.assert_allclose(back[:, 1:], np.tile(START[1:], (len(back), 1)))
+    np.testing.assert_allclose(back[:, 1], START[1])
+    # everything seen free: the first rewind climbs `rewind_climb_m` along its length, the
+    # nose kept towards the goal
+    climb = START[2] - back[:, 2]
+    assert climb[0] == 0.0 and climb[-1] == pytest.approx(PARAMS.rewind_climb_m)
+    assert np.all(np.diff(climb) >= 0.0)
+    assert output.reference.yaw_target_rad == pytest.approx(0.0)
+
+
+def _rewinds(world: SyntheticOccupancyMap, count: int = 1) -> list[np.ndarray]:
+    """The paths of the first `count` rewinds of a vehicle that flew 6 s north at 1 m/s and
+    then stopped for good (each rewind starts from there: the vehicle does not follow)."""
+    planner = LocalPlanner(PARAMS, LIBRARY)
+    planner.set_goal(GOAL, 0.0)
+    position, velocity, now_s = START.copy(), np.array([1.0, 0.0, 0.0]), 0.0
+    for _ in range(60):
+        planner.step(now_s, VehicleState(now_s, position, velocity, 0.0), velocity, world)
+        position, now_s = position + 0.1 * velocity, now_s + 0.1
+    paths: list[np.ndarray] = []
+    previous = None
+    while len(paths) < count and now_s < 100.0:
+        output = planner.step(now_s, VehicleState(now_s, position, velocity, 0.0), velocity, world)
+        if output.state is PlannerState.REWINDING and previous is not PlannerState.REWINDING:
+            paths.append(output.reference.positions_ned_m)
+        previous = output.state
+        now_s += 0.1
+    return paths
+
+
+def test_a_rewind_changes_height_only_through_space_seen_free() -> None:
+    """Up first, down on the second rewind; the other way where the map holds something
+    (or has not seen) along the ramp; level where both ways are blocked."""
+    climb = PARAMS.rewind_climb_m
+    up, down = _rewinds(SyntheticOccupancyMap(omniscient=True), 2)
+    assert START[2] - up[-1, 2] == pytest.approx(climb)
+    assert START[2] - down[-1, 2] == pytest.approx(-climb)
+    # a deck 0.9 m over the flown path, from 1 m to 3 m north (the ramp's end)
+    deck = Box(np.array([1.0, -5.0, START[2] - 2.0]), np.array([3.0, 5.0, START[2] - 0.9]))
+    (below,) = _rewinds(SyntheticOccupancyMap(boxes=[deck], omniscient=True))
+    assert START[2] - below[-1, 2] == pytest.approx(-climb)
+    floor = Box(np.array([1.0, -5.0, START[2] + 0.9]), np.array([3.0, 5.0, START[2] + 2.0]))
+    (level,) = _rewinds(SyntheticOccupancyMap(boxes=[deck, floor], omniscient=True))
+    np.testing.assert_allclose(level[:, 2], START[2])
+    # nothing seen: the flown path itself
+    (blind,) = _rewinds(SyntheticOccupancyMap())
+    np.testing.assert_allclose(blind[:, 2], START[2])
 
 
 def test_a_hold_mid_turn_brakes_along_the_turn_that_was_checked_free() -> None:
