@@ -36,3 +36,54 @@ def wire_mask(
     params = params or PerceptionParams()
     cut = params.confidence_threshold if threshold is None else threshold
     return remove_small_components(np.asarray(prob) >= cut, params.min_wire_component_px)
+
+
+def continued_wires(
+    mask: np.ndarray, min_length_px: float, max_angle_deg: float, factor: float
+) -> np.ndarray:
+    """(H, W) bool: `mask` plus the continuation of each of its straight wire components.
+
+    Beyond 4.4.1: a wire does not end in mid-air, so a wire the CNN finds only in part (a wire
+    level with the camera is found where a tree stands behind it and missed against the tree
+    line on the horizon) goes on beyond what was found. Each 8-connected component at least
+    `min_length_px` long along its principal axis, within `max_angle_deg` of the image rows, is
+    drawn on along that axis past both ends for `factor` times its length (clipped at the
+    image border), as thick as the component is on average. `factor` 0: `mask` unchanged.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    if factor <= 0 or not mask.any():
+        return mask
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(
+        mask.astype(np.uint8), connectivity=8, ltype=cv2.CV_32S
+    )
+    span = np.hypot(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
+    candidates = [k for k in range(1, count) if span[k] >= min_length_px]
+    if not candidates:
+        return mask
+    canvas = mask.astype(np.uint8)
+    rows, cols = np.nonzero(labels)
+    owner = labels[rows, cols]
+    max_slope = np.tan(np.radians(max_angle_deg))
+    for k in candidates:
+        pts = np.stack([cols[owner == k], rows[owner == k]], axis=1).astype(np.float64)
+        centre = pts.mean(axis=0)
+        _, vectors = np.linalg.eigh(np.cov(pts - centre, rowvar=False))
+        axis = vectors[:, 1] if vectors[0, 1] >= 0 else -vectors[:, 1]  # the principal axis
+        if abs(axis[1]) > max_slope * abs(axis[0]):
+            continue
+        along = (pts - centre) @ axis
+        length = float(along.max() - along.min())
+        if length < min_length_px:
+            continue
+        thickness = max(1, round(len(pts) / max(length, 1.0)))
+        reach = factor * length
+        for end, sign in ((along.max(), 1.0), (along.min(), -1.0)):
+            start = centre + end * axis
+            stop = start + sign * reach * axis
+            cv2.line(canvas, _px(start), _px(stop), 1, thickness, cv2.LINE_8)
+    return canvas.astype(bool)
+
+
+def _px(point: np.ndarray) -> tuple[int, int]:
+    """An (x, y) point as the integer pixel cv2 draws to."""
+    return int(np.rint(point[0])), int(np.rint(point[1]))

@@ -15,7 +15,7 @@ from perception.baseline import (
 )
 from perception.metrics import evaluate_predictions
 from perception.params import PerceptionParams
-from perception.postprocess import remove_small_components, wire_mask
+from perception.postprocess import continued_wires, remove_small_components, wire_mask
 
 
 def test_small_8_connected_components_are_removed():
@@ -42,6 +42,27 @@ def test_wire_mask_thresholds_at_095_and_drops_speckles():
     np.testing.assert_array_equal(mask, expected)
     low = wire_mask(prob, PerceptionParams(confidence_threshold=0.9, min_wire_component_px=0))
     assert low[10].all() and low[15, 3:6].all()
+
+
+def test_a_straight_wire_found_in_part_is_continued_past_both_ends():
+    mask = np.zeros((60, 200), bool)
+    cv2.line(mask.view(np.uint8), (80, 30), (119, 35), 1, 2)  # 40 px, 7 degrees, 2 px thick
+    mask[5:50, 20] = True  # a ladder rail: vertical, not a wire crossing the path
+    mask[45, 150:160] = True  # too short to say which way it runs
+    continued = continued_wires(mask, 30.0, 30.0, 1.0)
+    assert (continued >= mask).all()
+    added = continued & ~mask
+    cols = np.nonzero(added.any(axis=0))[0]
+    assert 34 <= cols.min() <= 42 and 157 <= cols.max() <= 165  # one length on each side
+    rows = np.nonzero(added[:, 45])[0]  # on the line's extension: 30 - 35 * 5 / 39 = 25.5
+    assert 24.5 <= rows.mean() <= 26.5 and len(rows) <= 5  # about as thick as found
+    assert not added[:, :30].any()  # not the rail, not the speckle: only the line
+    assert not added[44:47, 140:].any()
+    far = continued_wires(mask, 30.0, 30.0, 10.0)  # clipped at the border
+    assert far[:, 0].any() and far[:, -1].any() and far.shape == mask.shape
+    np.testing.assert_array_equal(continued_wires(mask, 30.0, 30.0, 0.0), mask)
+    np.testing.assert_array_equal(continued_wires(mask, 30.0, 5.0, 1.0), mask)  # too steep
+    np.testing.assert_array_equal(continued_wires(mask, 50.0, 30.0, 1.0), mask)  # too short
 
 
 def test_rasterised_lines_give_one_score_level_per_thickness():

@@ -63,7 +63,11 @@ def assert_flew_it(verdict: dict) -> None:
 #   line, are mapped late or not at all, and the vehicle threads the 2.5 m gaps. A 0.5 m
 #   wire margin trades the strikes for holds (2 of 4 reached the goal, 1 within 120 s) and
 #   loses the world-file flight below (2 of 2 holds, against 2 of 2 at 1.6 m with 0.25).
-@pytest.mark.parametrize(("scenario", "seed"), [("ladder-wire", 1), ("curvy-corridor", 0)])
+# ladder-wire seed 7: the wire level with the camera is found only in front of a tree beside
+# the path; without perception.wire_continuation_factor the flight struck it (0.05 m).
+@pytest.mark.parametrize(
+    ("scenario", "seed"), [("ladder-wire", 1), ("ladder-wire", 7), ("curvy-corridor", 0)]
+)
 def test_the_stack_flies_the_thesis_scenarios_without_a_strike(
     scenario: str, seed: int, tmp_path: Path
 ) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.ingest.frames import CameraFrame
+from perception.postprocess import continued_wires
 from perception.segmenter import WireSegmenter
 
 
@@ -40,6 +41,14 @@ class WireDetector:
         if frame.image_bgr is None:
             return Perception(frame.stamp_s, frame.sequence, None, frame.disparity_px)
         prob = self._segmenter.probability(frame.image_bgr, "bgr")
+        params = self._segmenter.params
         mask = self._segmenter.mask_of(prob)
         possible = self._segmenter.possible_of(prob, mask)
+        mask = continued_wires(
+            mask,
+            params.wire_continuation_min_length_px,
+            params.wire_continuation_max_angle_deg,
+            params.wire_continuation_factor,
+        )
+        possible = possible | mask
         return Perception(frame.stamp_s, frame.sequence, mask, frame.disparity_px, possible)
