@@ -160,8 +160,12 @@ class LocalPlanner:
         speed, stopped, heading, positions, velocities = self._placed_library(
             vehicle, commanded_velocity_ned_mps
         )
-        bearing = float(np.arctan2(*(self._goal - position)[[1, 0]]))
-        off_nose = abs(float(wrap_angle_rad(bearing - heading))) > p.align_heading_rad
+        to_goal = self._goal - position
+        bearing = float(np.arctan2(to_goal[1], to_goal[0]))
+        # a goal more below or above than ahead: its bearing is noise (the vehicle circled over
+        # one, turning to each new bearing), and no turn brings it into the forward camera
+        ahead = float(np.hypot(to_goal[0], to_goal[1])) >= abs(float(to_goal[2]))
+        off_nose = ahead and abs(float(wrap_angle_rad(bearing - heading))) > p.align_heading_rad
         # the goal lies inside the circle of the tightest turn the library flies from here
         turn_speed = max(speed, self._slowest_speed_mps)
         too_close = distance < 2.0 * turn_speed / self._max_turn_rate_radps

@@ -122,6 +122,26 @@ def test_a_wire_across_the_path_is_passed_over(altitude_m: float) -> None:
     assert max(np.abs(flight.path[:, 1])) < 1.0  # straight over, no detour
 
 
+@pytest.mark.parametrize(
+    ("goal", "aligns"),
+    [
+        ([-6.0, 1.0, -3.0], True),  # behind, level: turn the camera to it first
+        ([-0.3, 0.2, -1.0], False),  # right below: no turn shows it, and its bearing is noise
+        ([-0.3, 0.3, -7.0], False),  # right above
+    ],
+)
+def test_a_stopped_vehicle_turns_to_a_goal_off_its_nose_unless_it_is_below_or_above(
+    goal: list[float], aligns: bool
+) -> None:
+    planner = LocalPlanner(PARAMS, LIBRARY)
+    planner.set_goal(np.array(goal), 0.0)
+    world = SyntheticOccupancyMap()
+    world.add_view(START, 0.0)
+    output = planner.step(0.0, VehicleState(0.0, START, np.zeros(3), 0.0), np.zeros(3), world)
+    assert (output.label == "align") is aligns
+    assert (output.state is PlannerState.ALIGNING) is aligns
+
+
 def test_a_wire_over_the_path_with_a_ceiling_is_passed_under() -> None:
     obstacle = wire_across(8.0, 3.4)
     # a deck 4 m above home over the crossing: no way over, the flight floor is 1 m
