@@ -65,7 +65,10 @@ class DemoPattern:
     brake_s: float = 2.0  # zero-velocity pause after the square
     position_offset_ned_m: tuple[float, float, float] = (4.0, -3.0, -1.0)
     position_timeout_s: float = 20.0
-    position_tolerance_m: float = 0.5  # of the mean position over the settled window
+    # of the mean position over the settled window: PX4 SITL converges slowly on a position
+    # (the reference traces end 0.13-0.43 m off 10 s after a 5 m step; a CI flight of this
+    # pattern settled 0.51 m off, 0.39 m of it in height), so 0.5 m failed a healthy PX4
+    position_tolerance_m: float = 0.75
     position_settle_s: float = 1.5  # settled: this long within tolerance...
     settled_speed_mps: float = 0.35  # ...at a mean speed below this
     takeoff_settle_s: float = 8.0  # after Takeoff ends (0.8 m short on PX4), Hold climbs on
