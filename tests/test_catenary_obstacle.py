@@ -212,3 +212,20 @@ def test_the_mapper_keeps_keyframes_and_serves_the_same_pipeline(approach) -> No
     assert mapper.mask_for_droan(poses[-1], masks[-1]).sum() < 0.02 * masks[-1].sum()
     line = np.linspace(START, GOAL, 41)
     assert not mapper.collision_map(EmptyMap()).query(line).collision.any()
+
+
+def test_the_refit_can_run_elsewhere_while_the_last_fits_stand(approach) -> None:
+    mapper = CatenaryMapper(approach["camera"], PARAMS, MAPPING)
+    poses, masks = approach["poses"], approach["masks"]
+    for i, (pose, mask) in enumerate(zip(poses, masks, strict=True)):
+        mapper.add_frame(0.2 * i, pose, mask)
+    keyframes = mapper.pending_keyframes()
+    assert keyframes is not None and len(keyframes) == len(poses)
+    assert mapper.pending_keyframes() is None  # handed out once
+    # until the refit is used, the slab stays whole and no tube is in the way
+    assert mapper.obstacles() == []
+    assert mapper.mask_for_droan(poses[-1], masks[-1]).sum() == masks[-1].sum()
+    (fit,) = mapper.fit_keyframes(keyframes)
+    mapper.use_fits([fit])
+    assert len(mapper.obstacles()) == 1 and mapper.fits() == [fit]  # nothing owed: no refit
+    assert mapper.mask_for_droan(poses[-1], masks[-1]).sum() < 0.02 * masks[-1].sum()

@@ -213,3 +213,21 @@ async def test_a_loop_of_timeouts_can_always_be_cancelled() -> None:
         task.cancel()
         done, _ = await asyncio.wait([task], timeout=1.0)
         assert done, "a cancellation was swallowed"
+
+
+def test_the_map_builder_hands_out_each_catenary_refit_once_and_uses_the_finished_one() -> None:
+    mapping = MappingParams(camera_width_px=320, camera_height_px=240, max_nodes=4)
+    builder = MapBuilder(mapping, CatenaryParams(use_in_collision_check=True))
+    wire = np.zeros((120, 160), bool)
+    wire[40, 20:140] = True
+    builder.add_pose(0.0, Pose.identity())
+    builder.add_pose(1.0, Pose(np.eye(3), np.array([0.0, 0.0, -2.0])))
+    for seq, stamp_s in enumerate((0.0, 1.0)):  # 2 m apart: both keyframes
+        builder.insert(Perception(stamp_s, seq, wire, None), builder.camera_pose_at(stamp_s))
+    refit = builder.take_catenary_refit()
+    assert refit is not None and builder.take_catenary_refit() is None  # once
+    assert builder.catenary is not None and builder.catenary.obstacles() == []  # not yet used
+    fits = refit()  # where the flight process runs it: its "catenary" worker
+    assert fits and all(f.stamp_s == 1.0 for f in fits)  # of the keyframes handed out
+    builder.use_catenary_fits(fits)
+    assert builder.catenary.fits() is fits  # used as it is: nothing owed, no refit here

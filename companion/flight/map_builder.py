@@ -5,13 +5,17 @@ telemetry interpolated at the frame's stamp (`geometry.pose.PoseHistory`, 4.4.6)
 with the camera mount. A frame whose stamp the pose history does not cover is not fused:
 a frame at a wrong pose is worse than none. With `catenary.use_in_collision_check`, wire
 masks also feed the catenary mapper (ch. 3), whose confident tubes join the collision check
-and whose explained pixels leave DROAN's 4-20 m slab (3.7.2).
+and whose explained pixels leave DROAN's 4-20 m slab (3.7.2); the refit owed after each
+keyframe is handed out (`take_catenary_refit`) to run off the map's worker, and the map uses
+the newest finished one.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 from companion.flight.perceive import Perception
 from geometry.camera import (
@@ -20,7 +24,8 @@ from geometry.camera import (
     world_from_camera,
 )
 from geometry.pose import Pose, PoseHistory
-from mapping.catenary.mapper import CatenaryMapper
+from mapping.catenary.fit import CatenaryFit
+from mapping.catenary.mapper import CatenaryMapper, Keyframes
 from mapping.catenary.params import CatenaryParams
 from mapping.droan.params import MappingParams
 from mapping.droan.pose_graph import DroanMap, InsertResult
@@ -59,6 +64,7 @@ class MapBuilder:
         self.droan = DroanMap(self.rig, mapping)
         self._mapping, self._catenary_params = mapping, catenary
         self.catenary: CatenaryMapper | None = None
+        self._refit: Keyframes | None = None
         self.newest_frame_s = -math.inf
 
     def add_pose(self, stamp_s: float, world_from_body: Pose) -> None:
@@ -90,6 +96,7 @@ class MapBuilder:
         if mask is not None and self._catenary_params.use_in_collision_check:
             catenary = self._catenary_mapper(mask.shape[1])
             catenary.add_frame(perception.stamp_s, pose, mask)
+            self._refit = catenary.pending_keyframes() or self._refit
             mask = catenary.mask_for_droan(pose, mask)
             wires = len(catenary.obstacles())
         possible = None if mask is None else perception.possible_mask
@@ -101,6 +108,19 @@ class MapBuilder:
             perception.stamp_s, perception.sequence, pose, result, len(self.droan), wires,
             wire_evidence,
         )  # fmt: skip
+
+    def take_catenary_refit(self) -> Callable[[], list[CatenaryFit]] | None:
+        """The catenary refit owed since the last keyframe (once), to run off the map's worker
+        (a refit takes up to seconds; meanwhile the last fits stand), or None."""
+        keyframes, self._refit = self._refit, None
+        if keyframes is None or self.catenary is None:
+            return None
+        return partial(self.catenary.fit_keyframes, keyframes)
+
+    def use_catenary_fits(self, fits: list[CatenaryFit]) -> None:
+        """The finished refit's wires, for the next inserts and planning queries."""
+        if self.catenary is not None:
+            self.catenary.use_fits(fits)
 
     def occupancy_map(self) -> OccupancyMap:
         """What the planner queries: DROAN, with the confident catenary tubes when enabled."""

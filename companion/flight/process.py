@@ -5,6 +5,7 @@ camera source -> [ingest] -> camera -> [perceive: wire CNN, worker "perceive"] -
 telemetry -> [vehicle] -> PoseHistory, vehicle                                       |
 perception + pose at the frame's stamp -> [map: DROAN insert, worker "map"] -> map   v
 map update or 1/planning.rate_hz -> [plan: planner, worker "map"] -> plan
+map update -> [fit wires: catenary refit, worker "catenary"] (catenary.use_in_collision_check)
 plan, planning.setpoint_rate_hz or a new plan -> [track: tracker] -> setpoint -> link
 mission.rate_hz -> [mission: state machine] -> arm / takeoff / offboard / land on the link
 ```
@@ -156,6 +157,8 @@ class FlightProcess:
             self._status,
             self.ground.run,
         ]
+        if self.settings.catenary.use_in_collision_check:
+            stages.append(self._fit_wires)
         try:
             async with asyncio.TaskGroup() as group:
                 tasks = [group.create_task(stage(), name=stage.__name__) for stage in stages]
@@ -284,6 +287,24 @@ class FlightProcess:
             else:
                 self.report.fused += 1
             self.bus.publish("map", update)
+
+    async def _fit_wires(self) -> None:
+        """After each map update, the catenary refit it owes (ch. 3) on a worker of its own:
+        a refit takes up to 2 s, which on the map's worker would stall mapping and planning
+        (`catenary.use_in_collision_check`)."""
+        seen = 0
+        while True:
+            stamped = await self.bus.newer("map", seen)
+            seen = stamped.seq
+            builder = self.builder
+            refit = builder.take_catenary_refit()
+            if refit is None:
+                continue
+            start_s = self.clock.now_s()
+            fits = await self.clock.compute("catenary", refit)
+            self.times.add("catenary", self.clock.now_s() - start_s)
+            if builder is self.builder:  # not rebuilt meanwhile (a pose jump)
+                builder.use_catenary_fits(fits)
 
     async def _plan(self) -> None:
         """A planning cycle on every map update, and at least at `planning.rate_hz`."""

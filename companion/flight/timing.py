@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STAGES = ("ingest", "cnn", "map", "plan", "stream", "frame_to_setpoint")
+STAGES = ("ingest", "cnn", "map", "catenary", "plan", "stream", "frame_to_setpoint")
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,7 +5,8 @@ pass the keyframe rule of 3.4.2 (`MappingParams.keyframe_translation_m` /
 `keyframe_rotation_deg`, shared with DROAN's pose graph) are kept, the newest
 `CatenaryParams.max_keyframes` of them. Wires are refitted (3.7.3) only when a keyframe
 arrives; between keyframes the last fits stand, stamped with their newest keyframe's time.
-Pure and synchronous: no clock, no I/O.
+Pure and synchronous: no clock, no I/O. The refit can be taken out (`pending_keyframes`,
+`fit_keyframes`, `use_fits`) and run on another thread, as the flight process does.
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ from mapping.catenary.obstacle import (
 from mapping.catenary.params import CatenaryParams
 from mapping.droan.params import MappingParams
 from mapping.query import OccupancyMap
+
+Keyframes = tuple[tuple[float, Pose, np.ndarray], ...]
+"""(stamp s, world_from_camera, wire mask) of each keyframe, oldest first."""
 
 
 class CatenaryMapper:
@@ -61,25 +65,41 @@ class CatenaryMapper:
         return True
 
     def fits(self) -> list[CatenaryFit]:
-        """One fit per wire seen in >= 2 keyframes; refitted only after a new keyframe."""
-        if self._dirty:
-            stamps, poses, masks = zip(*self._keyframes, strict=True)
-            self._fits = reconstruct_wires(
-                self.camera,
-                poses,
-                masks,
-                stamps,
-                self.params,
-                self.mapping.wire_depth_near_m,
-                self.mapping.wire_depth_far_m,
-            )
-            self._dirty = False
+        """One fit per wire seen in >= 2 keyframes; refitted here after a new keyframe."""
+        keyframes = self.pending_keyframes()
+        if keyframes is not None:
+            self.use_fits(self.fit_keyframes(keyframes))
         return self._fits
 
+    def pending_keyframes(self) -> Keyframes | None:
+        """The keyframes to refit since a keyframe arrived (once), or None: with
+        `fit_keyframes` and `use_fits`, the refit can run elsewhere while the last fits stand."""
+        if not self._dirty:
+            return None
+        self._dirty = False
+        return tuple(self._keyframes)
+
+    def fit_keyframes(self, keyframes: Keyframes) -> list[CatenaryFit]:
+        """The wires of `keyframes` (3.7.3), each seen in >= 2 of them."""
+        stamps, poses, masks = zip(*keyframes, strict=True)
+        return reconstruct_wires(
+            self.camera,
+            poses,
+            masks,
+            stamps,
+            self.params,
+            self.mapping.wire_depth_near_m,
+            self.mapping.wire_depth_far_m,
+        )
+
+    def use_fits(self, fits: list[CatenaryFit]) -> None:
+        """Make `fits` the ones `obstacles`, `mask_for_droan` and `collision_map` use."""
+        self._fits = fits
+
     def obstacles(self) -> list[WireObstacle]:
-        """Tubes of the confident fits (robot radius + k sigma, 3.7.2)."""
+        """Tubes of the confident fits (robot radius + k sigma, 3.7.2), of the last refit."""
         radius_m = self.mapping.robot_radius_m
-        return [o for f in self.fits() if (o := wire_obstacle(f, radius_m, self.params))]
+        return [o for f in self._fits if (o := wire_obstacle(f, radius_m, self.params))]
 
     def mask_for_droan(self, world_from_camera: Pose, wire_mask: np.ndarray) -> np.ndarray:
         """The wire mask DROAN should turn into its slab: unexplained pixels when switched on."""
@@ -93,7 +113,7 @@ class CatenaryMapper:
         """`base` (DROAN) with the confident wire tubes when `use_in_collision_check` is on."""
         return collision_map(
             base,
-            self.fits(),
+            self._fits,
             self.params,
             self.mapping.robot_radius_m,
             self.mapping.occupancy_threshold,

@@ -143,7 +143,11 @@ class CatenaryParams(BaseModel):
     )
     use_in_collision_check: bool = Field(
         False,
-        description="confident catenaries replace the 4-20 m wire slab in collision checks (3.7.2)",
+        description="confident catenaries replace the 4-20 m wire slab in collision checks "
+        "(3.7.2); the flight process refits them on a worker of its own (a refit: 0.65 s "
+        "p50, 1.8 s p99 on 2 cores), so map inserts stay fast (16 ms p99 against 2.2 s "
+        "refitting on the map's worker). Off by default: 24 of 36 sweep flights either way, "
+        "no strike",
     )
     tube_sigma_multiplier: float = Field(
         3.0,
