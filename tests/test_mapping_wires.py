@@ -1,6 +1,8 @@
 """Fig. 4.5: fusing wire observations from several heights localises stacked wires."""
 
 import numpy as np
+import pytest
+from scipy.spatial import cKDTree
 
 from geometry.camera import body_from_camera_from_params, stereo_rig_from_params
 from geometry.pose import Pose
@@ -14,14 +16,19 @@ WIRE_HEIGHTS_M = (6.0, 9.0, 12.0)
 WIRE_NORTH_M = 10.0
 
 
-def fused_map(altitudes_m: np.ndarray, wire_free_weight: float = 0.5) -> DroanMap:
+def fused_map(
+    altitudes_m: np.ndarray, wire_free_weight: float = 0.5, **mapping: float | int | bool
+) -> DroanMap:
     params = MappingParams(
-        robot_radius_m=0.3,
-        max_nodes=40,
-        camera_width_px=320,
-        camera_height_px=240,
-        wire_free_weight=wire_free_weight,
-        wire_position_margin_m=0.0,  # the expansion of eq. 4.3 alone, as in Fig. 4.5
+        **{
+            "robot_radius_m": 0.3,
+            "max_nodes": 40,
+            "camera_width_px": 320,
+            "camera_height_px": 240,
+            "wire_free_weight": wire_free_weight,
+            "wire_position_margin_m": 0.0,  # the expansion of eq. 4.3 alone, as in Fig. 4.5
+            **mapping,
+        }
     )
     rig = stereo_rig_from_params(params.camera)
     world = World(
@@ -91,14 +98,20 @@ def test_single_observation_is_a_slab_and_fusion_localises_three_wires() -> None
     assert occupied_fraction(thesis) < 0.95 * occupied_fraction(single)
 
 
-def passing_map(views: int, possible: bool) -> tuple[DroanMap, np.ndarray]:
+def passing_map(
+    views: int, possible: bool, triangulation: bool = False
+) -> tuple[DroanMap, np.ndarray]:
     """`views` views flown level with a wire 10 m ahead, 0.5 m apart (a wire no view can
     triangulate): the first two detect it, with a false wire about 1.1 m higher at its
     distance; the views after them miss both, their CNN (`possible`) still scoring the true
     wire undecided. Returns the map and the points (on the wire, on the false wire)."""
     params = MappingParams(
-        robot_radius_m=0.3, camera_width_px=320, camera_height_px=240, wire_free_weight=0.5
-    )  # the thesis' weight
+        robot_radius_m=0.3,
+        camera_width_px=320,
+        camera_height_px=240,
+        wire_free_weight=0.5,  # the thesis' weight
+        wire_triangulation=triangulation,
+    )
     rig = stereo_rig_from_params(params.camera)
     height = 6.0
     ends = [WIRE_NORTH_M, -40, -height], [WIRE_NORTH_M, 40, -height]
@@ -119,12 +132,50 @@ def passing_map(views: int, possible: bool) -> tuple[DroanMap, np.ndarray]:
     return droan, np.array([[WIRE_NORTH_M, 0, -height], [WIRE_NORTH_M, 0, -height - 1.1]])
 
 
-def test_a_wire_the_cnn_still_doubts_is_not_voted_away() -> None:
-    seen, points = passing_map(2, possible=False)
+@pytest.mark.parametrize("triangulation", [False, True])
+def test_a_wire_the_cnn_still_doubts_is_not_voted_away(triangulation: bool) -> None:
+    seen, points = passing_map(2, possible=False, triangulation=triangulation)
     assert seen.query(points).collision.tolist() == [True, True]
     # the thesis' two-way mask: eight views that miss it erase a wire seen twice
-    thesis, _ = passing_map(10, possible=False)
+    thesis, _ = passing_map(10, possible=False, triangulation=triangulation)
     assert thesis.query(points).collision.tolist() == [False, False]
     # views whose CNN scores the wire undecided abstain there, and still carve the false wire
-    doubting, _ = passing_map(10, possible=True)
+    doubting, _ = passing_map(10, possible=True, triangulation=triangulation)
     assert doubting.query(points).collision.tolist() == [True, False]
+
+
+def test_triangulated_wires_keep_the_wires_and_carve_the_fans_of_a_short_climb() -> None:
+    """`mapping.wire_triangulation`: a 4 m climb 10 m before three stacked wires, seen as the
+    flight camera sees them (640 x 480) and with the flight's expansion radius. Expanded
+    before the vote (Fig. 4.4), the fans of views a few decimetres apart overlap into one
+    wall; voted on thin rays and expanded after, they meet at the wires."""
+    flight = {
+        "camera_width_px": 640, "camera_height_px": 480, "max_nodes": 20,
+        "robot_radius_m": 0.5, "wire_position_margin_m": 0.25,
+    }  # fmt: skip
+    altitudes = np.arange(7.0, 11.01, 0.5)
+    expanded = fused_map(altitudes, wire_free_weight=0.25, **flight)
+    voted = fused_map(altitudes, wire_free_weight=0.25, wire_triangulation=True, **flight)
+    for droan in (expanded, voted):
+        assert column(droan, WIRE_HEIGHTS_M).all()
+        assert not column(droan, [7.5, 10.5]).any()
+    assert occupied_fraction(voted) < 0.5 * occupied_fraction(expanded)  # 0.12 against 0.32
+    behind = np.concatenate([ray_points(h, [14.0, 18.0]) for h in (6.0, 12.0)])
+    assert expanded.query(behind).collision.all()
+    assert voted.query(behind).collision.sum() <= 2
+    # one view alone is the prior: its rays through the wires, 4-20 m, expanded
+    single = fused_map(np.array([9.0]), wire_free_weight=0.25, wire_triangulation=True, **flight)
+    assert single.query(behind).collision.all()
+    assert not single.query(ray_points(6.0, [3.0, 21.5])).collision.any()
+
+
+def test_the_wire_voxels_answer_exactly_within_their_radius() -> None:
+    """The cell hash finds a wire voxel within the radius exactly where a k-d tree does."""
+    droan = fused_map(np.arange(7.0, 11.01, 0.5), wire_free_weight=0.25, wire_triangulation=True)
+    voxels = droan.wire_voxels
+    assert voxels is not None and len(voxels.wire_centres_m) > 1000
+    points = np.random.default_rng(1).uniform([0, -20, -15], [25, 20, 0], (100_000, 3))
+    distance, _ = cKDTree(voxels.wire_centres_m).query(points)
+    within = distance <= voxels.radius_m
+    assert 1000 < within.sum() < len(points) / 2
+    np.testing.assert_array_equal(voxels.occupancy(points) >= 1.0, within)

@@ -323,6 +323,11 @@ class DisparityExpander:
             front, back, np.where(own, block_front, front), np.where(own, block_back, back)
         )
 
+    def pooled_wire_mask(self, wire_mask: np.ndarray) -> np.ndarray:
+        """`(Hc, Wc) bool` grid cells holding a pixel of the mask (shapes as `expand_wire`)."""
+        mask = np.asarray(wire_mask, dtype=bool)
+        return _pool(mask, self._wire_pool_factor(mask.shape), np.logical_or, False)
+
     def expand_wire(self, wire_mask: np.ndarray) -> ExpandedImage:
         """Front/back images of a binary wire mask (4.4.3, Fig. 4.4).
 
@@ -339,8 +344,7 @@ class DisparityExpander:
         lower could not vote away (the vehicle climbed after it, 10 m in the fault field).
         Cells away from any wire are 0 (no wire).
         """
-        mask = np.asarray(wire_mask, dtype=bool)
-        pooled = _pool(mask.astype(np.float32), self._wire_pool_factor(mask.shape), np.fmax, 0.0)
+        pooled = self.pooled_wire_mask(wire_mask).astype(np.float32)
         back = np.zeros(pooled.shape, np.float32)
         reached, reach_u, reach_v = pooled, 0, 0
         for half_u, half_v, back_px in self._wire_levels:  # nested windows: grow step by step

@@ -66,6 +66,34 @@ class MappingParams(BaseModel):
         "depth of the slab): where a wire's pixels place it is less certain than a stereo "
         "return (the mask's width, pose interpolation, the CNN's blur), m",
     )
+    wire_triangulation: bool = Field(
+        False,
+        description="wires are voted on thin rays by all views first and C-space expanded "
+        "after (r_v + wire_position_margin_m around the points where the views agree; "
+        "`mapping.droan.wire_triangulation`), instead of expanding each view's rays before "
+        "the vote (4.4.3, Fig. 4.4), whose fans fuse into walls when the views are close",
+    )
+    wire_voxel_m: float = Field(
+        0.2,
+        gt=0,
+        le=1,
+        description="edge of the wire voxels (wire_triangulation); half their diagonal joins "
+        "the expansion radius, m",
+    )
+    wire_vote_max: float = Field(
+        3.0,
+        ge=1,
+        description="upper clamp of a wire voxel's summed votes (wire_triangulation): a wire "
+        "seen over and over is voted away by (max - gamma) / wire_free_weight frames that "
+        "rule it out",
+    )
+    wire_ray_tolerance_cells: int = Field(
+        1,
+        ge=0,
+        le=4,
+        description="a view's wire cells are dilated by this many expansion-grid cells before "
+        "it votes on a candidate (wire_triangulation): the mask's and the pose's error, cells",
+    )
     wire_depth_near_m: float = Field(4.0, gt=0, description="wire depth prior, near limit (4.4.3)")
     wire_depth_far_m: float = Field(20.0, gt=0, description="wire depth prior, far limit (4.4.3)")
     max_range_m: float = Field(

@@ -32,6 +32,7 @@ from geometry.pose import Pose
 from mapping.droan.expansion import DisparityExpander, ExpandedImage
 from mapping.droan.occupancy import summed_costs
 from mapping.droan.params import MappingParams
+from mapping.droan.wire_triangulation import WireVoxels, thin_wire_cells
 from mapping.query import OccupancyQuery
 
 _MIN_DEPTH_M = 1e-3
@@ -73,6 +74,21 @@ class DroanMap:
         self._slots: list[DroanNode | None] = [None] * n
         self._order: list[int] = []  # occupied slots, oldest first
         self._active = np.zeros(0, dtype=np.intp)
+        self.wire_voxels = (
+            WireVoxels(
+                self.grid_camera,
+                n,
+                params.wire_voxel_m,
+                params.robot_radius_m + params.wire_position_margin_m,
+                params.occupancy_threshold,
+                params.wire_free_weight,
+                params.wire_vote_max,
+                (params.wire_depth_near_m, params.wire_depth_far_m),
+                params.max_range_m,
+            )
+            if params.wire_triangulation
+            else None
+        )
         self._occupancy(np.zeros((0, 3)))  # compile (or load) the query kernel now, not in flight
 
     # --- graph ---------------------------------------------------------------------------
@@ -90,10 +106,14 @@ class DroanMap:
         self._slots = [None] * len(self._slots)
         self._order = []
         self._active = np.zeros(0, dtype=np.intp)
+        if self.wire_voxels is not None:
+            self.wire_voxels.clear()
 
     def memory_bytes(self) -> int:
-        """Bytes held by node images and poses (preallocated for `max_nodes`)."""
-        return self._images.nbytes + self._projection.nbytes + self._offset.nbytes
+        """Bytes held by node images and poses (preallocated for `max_nodes`), and by the
+        wire voxels when triangulating."""
+        voxels = 0 if self.wire_voxels is None else self.wire_voxels.memory_bytes()
+        return self._images.nbytes + self._projection.nbytes + self._offset.nbytes + voxels
 
     def prune(self, now_s: float) -> None:
         """Evict nodes older than `max_node_age_s` (when that limit is set)."""
@@ -146,7 +166,6 @@ class DroanMap:
             slot = min(set(range(len(self._slots))) - set(self._order))
         else:
             slot = self._order.pop(0)
-        self._write(slot, world_from_camera, disparity_px, wire_mask, possible_mask)
         self._slots[slot] = DroanNode(
             float(stamp_s),
             world_from_camera,
@@ -154,6 +173,10 @@ class DroanMap:
             disparity_px is not None,
             wire_mask is not None,
         )
+        if wire_mask is not None and self.wire_voxels is not None:
+            self._vote_wires(slot, keyframe, world_from_camera, wire_mask, possible_mask)
+            wire_mask = possible_mask = None  # the voxels hold its wire evidence
+        self._write(slot, world_from_camera, disparity_px, wire_mask, possible_mask)
         self._order.append(slot)
         self._active = np.array(self._order, dtype=np.intp)
         return InsertResult.KEYFRAME if keyframe else InsertResult.LIVE
@@ -182,6 +205,26 @@ class DroanMap:
         k = self.grid_camera.intrinsic_matrix()
         self._projection[slot] = k @ camera_from_world.rotation
         self._offset[slot] = k @ camera_from_world.translation_m
+
+    def _vote_wires(
+        self,
+        slot: int,
+        keyframe: bool,
+        world_from_camera: Pose,
+        wire_mask: np.ndarray,
+        possible_mask: np.ndarray | None,
+    ) -> None:
+        """A frame's thin-ray votes into the wire voxels (`wire_triangulation`)."""
+        pooled = self.expander.pooled_wire_mask
+        flags = thin_wire_cells(
+            pooled(wire_mask),
+            None if possible_mask is None else pooled(possible_mask | wire_mask),
+            self.params.wire_ray_tolerance_cells,
+        )
+        voters = [i for i in self._order if i != slot and self._slots[i].has_wire]  # type: ignore[union-attr]
+        self.wire_voxels.insert(  # type: ignore[union-attr]
+            slot, keyframe, world_from_camera, flags, np.array(voters, np.intp)
+        )
 
     def _node_view(self, slot: int) -> np.ndarray:
         h, w = self.grid_camera.shape
@@ -221,6 +264,8 @@ class DroanMap:
             parts = list(_pool(threads).map(self._occupancy, np.array_split(points, threads)))
             stereo, wire, seen = (np.concatenate(part) for part in zip(*parts, strict=True))
         gamma = self.params.occupancy_threshold
+        if self.wire_voxels is not None:
+            wire = np.maximum(wire, self.wire_voxels.occupancy(points))
         occupancy = np.maximum(stereo, wire)
         return OccupancyQuery(occupancy >= gamma, occupancy, seen, stereo >= gamma)
 
