@@ -24,6 +24,7 @@ from hil.sensors.params import CameraSimParams
 from hil.world.model import World, wire_crossing_world
 from mapping.droan.params import MappingParams
 from mapping.droan.pose_graph import DroanMap
+from mapping.droan.wire_triangulation import voxel_key
 from planning.library import generate_library
 from planning.params import PlanningParams
 
@@ -87,8 +88,8 @@ def _octomap_caught(tree: Any, points: np.ndarray, resolution_m: float) -> np.nd
         return np.zeros(len(points), bool)
 
     def encode(keys: np.ndarray) -> np.ndarray:
-        k = keys.astype(np.int64) + (1 << 20)
-        return (k[..., 0] << 42) | (k[..., 1] << 21) | k[..., 2]
+        k = keys.astype(np.int64)
+        return voxel_key(k[..., 0], k[..., 1], k[..., 2])
 
     occupied_keys = np.unique(encode(np.floor(np.asarray(occupied) / resolution_m)))
     keys = np.floor(points / resolution_m)

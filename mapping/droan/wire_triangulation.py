@@ -74,12 +74,20 @@ def _rehash(table: np.ndarray, keys: np.ndarray, count: int) -> None:
         table[_find(table, keys, keys[i])] = i
 
 
+@numba.vectorize(["int64(int64, int64, int64)"], cache=True)
+def voxel_key(ix: int, iy: int, iz: int) -> int:
+    """One int64 key of integer voxel indices in [-2^20, 2^20) (a ufunc: any shapes)."""
+    return ((ix + _OFFSET) << np.int64(42)) | ((iy + _OFFSET) << np.int64(21)) | (iz + _OFFSET)
+
+
 @numba.njit(cache=True, nogil=True)
 def _key(x: float, y: float, z: float, inv_voxel: float) -> np.int64:
-    ix = np.int64(np.floor(x * inv_voxel)) + _OFFSET
-    iy = np.int64(np.floor(y * inv_voxel)) + _OFFSET
-    iz = np.int64(np.floor(z * inv_voxel)) + _OFFSET
-    return (ix << np.int64(42)) | (iy << np.int64(21)) | iz
+    """`voxel_key` of the voxel of edge 1 / `inv_voxel` holding point (x, y, z)."""
+    return voxel_key(
+        np.int64(np.floor(x * inv_voxel)),
+        np.int64(np.floor(y * inv_voxel)),
+        np.int64(np.floor(z * inv_voxel)),
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -89,6 +97,15 @@ def _centre(key: np.int64, voxel: float) -> tuple[float, float, float]:
     iy = ((key >> np.int64(21)) & bits) - _OFFSET
     iz = (key & bits) - _OFFSET
     return (ix + 0.5) * voxel, (iy + 0.5) * voxel, (iz + 0.5) * voxel
+
+
+@numba.njit(cache=True, nogil=True)
+def _centres(keys: np.ndarray, voxel: float) -> np.ndarray:
+    """`(M, 3)` centres of the voxels `keys`."""
+    out = np.empty((keys.shape[0], 3))
+    for i in range(keys.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = _centre(keys[i], voxel)
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -128,12 +145,12 @@ def _vote(
     far_m: float,
     max_range_m: float,
     free_weight: float,
-    vote_min: float,
     vote_max: float,
 ) -> None:
     """The votes (step 2 of the module doc) of the views `slots` added to `votes` of the
-    voxels `first..count`, clamped after each view. View s projects world points with
-    `projection[s]` (K R_cw) and `offset[s]` (K t_cw) onto its `(Hc, Wc)` `flags[s]`."""
+    voxels `first..count`, clamped at `vote_max` after each view. View s projects world
+    points with `projection[s]` (K R_cw) and `offset[s]` (K t_cw) onto its `(Hc, Wc)`
+    `flags[s]`."""
     height, width = flags.shape[1], flags.shape[2]
     for slot in slots:
         k, t = projection[slot], offset[slot]
@@ -150,7 +167,7 @@ def _vote(
             if cell & 1 and z <= far_m:
                 votes[i] = min(votes[i] + 1.0, vote_max)
             elif not cell & 2:
-                votes[i] = max(votes[i] - free_weight, vote_min)
+                votes[i] -= free_weight
 
 
 @numba.njit(cache=True, nogil=True)
@@ -259,7 +276,7 @@ class WireVoxels:
         self.radius_m = radius_m + 0.5 * np.sqrt(3.0) * voxel_m  # from a voxel's centre
         self.gamma = gamma
         self._vote_args = (
-            depth_range_m[0], depth_range_m[1], max_range_m, free_weight, -np.inf, vote_max
+            depth_range_m[0], depth_range_m[1], max_range_m, free_weight, vote_max
         )  # fmt: skip
         self._depths = np.arange(depth_range_m[0], depth_range_m[1] + voxel_m / 2, voxel_m)
         self._flags = np.zeros((slots, *camera.shape), np.uint8)
@@ -274,6 +291,7 @@ class WireVoxels:
         self._vote(self._votes, 0, 0, np.zeros(0, np.intp))
         _keep(self._keys, self._votes, np.zeros(0, bool), 0)
         _rehash(self._table, self._keys, 0)
+        _centres(self._keys[:0], self.voxel_m)
         point = np.zeros((1, 3))
         _votes_within(point, point, np.ones(1, np.float32), *_cell_lists(point, 1.0), 1.0, 1.0)
 
@@ -334,17 +352,12 @@ class WireVoxels:
             self._vote(votes, 0, self._count, this)
         wire = votes >= self.gamma
         keep = wire | (self._votes[: self._count] >= self.gamma)
-        centres, wire_votes = self._centres_of(wire), votes[wire]
+        centres = _centres(self._keys[: self._count][wire], self.voxel_m)
+        wire_votes = votes[wire]
         if not keep.all():
             self._count = _keep(self._keys, self._votes, keep, self._count)
             _rehash(self._table, self._keys, self._count)
         self._use(centres, wire_votes)
-
-    def _centres_of(self, selected: np.ndarray) -> np.ndarray:
-        keys = self._keys[: self._count][selected]
-        bits = (1 << 21) - 1
-        index = np.stack([keys >> 42, (keys >> 21) & bits, keys & bits], 1) - int(_OFFSET)
-        return (index + 0.5) * self.voxel_m
 
     def _use(self, centres: np.ndarray, votes: np.ndarray) -> None:
         """Answer queries from these wire voxels."""
