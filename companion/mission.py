@@ -96,7 +96,7 @@ class MissionState(StrEnum):
     ARMING = "arming"
     TAKEOFF = "takeoff"
     NAVIGATE = "navigate"  # flying the goal queue on a free library trajectory
-    AVOID = "avoid"  # the planner brakes or turns away: nothing free towards the goal
+    AVOID = "avoid"  # the planner brakes, or holds short of a goal seen blocked
     RECOVERY = "recovery"  # the planner rotates in place or rewinds (4.5)
     HOLD = "hold"  # holding position: end of mission, operator hold, unreachable goal
     FAILSAFE = "failsafe"  # a fault stopped the mission (see `Decision.cause`)
@@ -209,6 +209,7 @@ _PLANNER_TO_STATE = {
     PlannerState.IDLE: MissionState.NAVIGATE,
     PlannerState.ALIGNING: MissionState.NAVIGATE,
     PlannerState.BRAKING: MissionState.AVOID,
+    PlannerState.GOAL_BLOCKED: MissionState.AVOID,
     PlannerState.RECOVERING: MissionState.RECOVERY,
     PlannerState.REWINDING: MissionState.RECOVERY,
 }

@@ -209,6 +209,15 @@ class PlanningParams(BaseModel):
     unreachable_confirm_cycles: int = Field(
         5, ge=1, le=100, description="cycles the goal must be seen in solid collision, count"
     )
+    goal_blocked_timeout_s: float = Field(
+        10.0,
+        ge=0,
+        le=600,
+        description="a goal seen in solid collision is held short of and re-checked every "
+        "cycle for this long: seen free for unreachable_confirm_cycles again, the vehicle flies "
+        "on (one view's false obstacle ends no mission); still blocked, the goal is "
+        "unreachable, s",
+    )
     unreachable_range_m: float = Field(
         6.0,
         gt=0,

@@ -15,9 +15,12 @@ tracker commanded last and the occupancy map; it returns a `PlannerOutput` whose
 - ALIGNING: with the goal far off the nose at the start of a goal (or after a rewind), or
   closer than the tightest library turn could reach (no orbiting the goal): brake, then
   rotate towards it before choosing a trajectory.
-- ARRIVED / UNREACHABLE: hold. Unreachable: the goal seen in solid collision (located
-  evidence, not the wire depth prior: `OccupancyQuery.solid`) for
-  `unreachable_confirm_cycles` cycles from within `unreachable_range_m`, or stuck again after
+- GOAL_BLOCKED: the goal seen in solid collision (located evidence, not the wire depth
+  prior: `OccupancyQuery.solid`) for `unreachable_confirm_cycles` cycles from within
+  `unreachable_range_m`: hold where the vehicle is and keep checking the goal. Seen free for
+  as many cycles again, fly on (beyond 4.5: one view's false obstacle ends no mission); still
+  blocked after `goal_blocked_timeout_s`, unreachable.
+- ARRIVED / UNREACHABLE: hold. Unreachable: blocked past its timeout, or stuck again after
   `max_rewinds` rewinds.
 """
 
@@ -69,6 +72,8 @@ class LocalPlanner:
         self._last_progress_s = 0.0
         self._rewinds = 0
         self._goal_hits = 0
+        self._goal_clears = 0
+        self._blocked_since_s = 0.0
         self._turned_rad = 0.0
         self._last_yaw_rad: float | None = None
 
@@ -96,7 +101,7 @@ class LocalPlanner:
         self._best_distance_m = np.inf
         self._last_progress_s = now_s
         self._rewinds = 0
-        self._goal_hits = 0
+        self._goal_hits = self._goal_clears = 0
 
     def step(
         self,
@@ -125,8 +130,17 @@ class LocalPlanner:
             and distance <= p.unreachable_range_m
         )
         self._goal_hits = self._goal_hits + 1 if goal_blocked else 0
-        if self._goal_hits >= p.unreachable_confirm_cycles:
-            return self._hold(now_s, vehicle, PlannerState.UNREACHABLE, position, distance, 1)
+        self._goal_clears = 0 if goal_blocked else self._goal_clears + 1
+        if self._state is PlannerState.GOAL_BLOCKED:
+            if now_s - self._blocked_since_s >= p.goal_blocked_timeout_s:
+                return self._hold(now_s, vehicle, PlannerState.UNREACHABLE, position, distance, 1)
+            if self._goal_clears < p.unreachable_confirm_cycles:
+                return self._keep(now_s, distance, 0, 1, 1)
+            self._state = PlannerState.IDLE  # seen free again: fly on
+            self._last_progress_s = now_s
+        elif self._goal_hits >= p.unreachable_confirm_cycles:
+            self._blocked_since_s = now_s
+            return self._hold(now_s, vehicle, PlannerState.GOAL_BLOCKED, position, distance, 1)
 
         if distance < self._best_distance_m - p.progress_min_m:
             self._best_distance_m = distance

@@ -21,6 +21,7 @@ class PlannerState(StrEnum):
     RECOVERING = "recovering"  # stopped and boxed in: rotate in place to look for a way (4.5)
     REWINDING = "rewinding"  # stuck: back off along the flown path
     ARRIVED = "arrived"  # within the arrival tolerance: hold at the goal
+    GOAL_BLOCKED = "goal_blocked"  # goal seen in solid collision: hold, re-checking it
     UNREACHABLE = "unreachable"  # goal inside an obstacle, or stuck after every rewind: hold
 
 

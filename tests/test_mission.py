@@ -95,6 +95,7 @@ def test_the_planner_state_maps_to_avoid_and_recovery() -> None:
     flight = Flight()
     flight.airborne()
     assert flight.step(planner=PlannerState.BRAKING).state is MissionState.AVOID
+    assert flight.step(planner=PlannerState.GOAL_BLOCKED).state is MissionState.AVOID
     assert flight.step(planner=PlannerState.RECOVERING).state is MissionState.RECOVERY
     assert flight.step(planner=PlannerState.REWINDING).state is MissionState.RECOVERY
     assert flight.step(planner=PlannerState.TRACKING).state is MissionState.NAVIGATE
