@@ -11,6 +11,7 @@ from hil.sensors.params import CameraSimParams
 from hil.world.model import World, catenary_wire
 from mapping.droan.params import MappingParams
 from mapping.droan.pose_graph import DroanMap
+from mapping.droan.wire_depth import WireViews
 
 WIRE_HEIGHTS_M = (6.0, 9.0, 12.0)
 WIRE_NORTH_M = 10.0
@@ -167,6 +168,77 @@ def test_triangulated_wires_keep_the_wires_and_carve_the_fans_of_a_short_climb()
     single = fused_map(np.array([9.0]), wire_free_weight=0.25, wire_triangulation=True, **flight)
     assert single.query(behind).collision.all()
     assert not single.query(ray_points(6.0, [3.0, 21.5])).collision.any()
+
+
+FLIGHT_MAP = {
+    "camera_width_px": 640, "camera_height_px": 480, "max_nodes": 20,
+    "robot_radius_m": 0.5, "wire_position_margin_m": 0.25, "wire_free_weight": 0.25,
+}  # fmt: skip
+
+
+def test_wire_rays_cut_by_the_parallax_of_a_short_climb_keep_the_wires_and_lose_the_wall() -> None:
+    """`mapping.wire_parallax_views`: the same 4 m climb; each wire ray's depths are cut to
+    those the other views do not rule out before the expansion, and the older nodes are cut
+    again as views arrive."""
+    altitudes = np.arange(7.0, 11.01, 0.5)
+    expanded = fused_map(altitudes, **FLIGHT_MAP)
+    cut = fused_map(altitudes, wire_parallax_views=24, **FLIGHT_MAP)
+    assert column(cut, WIRE_HEIGHTS_M).all()
+    assert not column(cut, [7.5, 10.5]).any()
+    assert occupied_fraction(cut) < 0.25 * occupied_fraction(expanded)  # 0.05 against 0.32
+    behind = np.concatenate([ray_points(h, [14.0, 18.0]) for h in (6.0, 12.0)])
+    before = np.concatenate([ray_points(h, [5.0, 7.0]) for h in (6.0, 12.0)])
+    assert expanded.query(np.concatenate([behind, before])).collision.all()
+    assert not cut.query(np.concatenate([behind, before])).collision.any()
+    # the first view's rays, cut when it was inserted (no view before it) and again since
+    first = cut.nodes[0]
+    assert first.world_from_camera.translation_m[2] == -7.0
+    wire = cut.node_images(0)[1]
+    reached = wire.back_px > 0
+    near_m, far_m = (
+        cut.rig.bf_px_m / np.median(wire.front_px[reached]),
+        cut.rig.bf_px_m / np.median(wire.back_px[reached]),
+    )
+    assert 7.5 < near_m < 10.0 < far_m < 12.0  # 8.5-10.8 m: the wires are 10 m ahead
+    alone = fused_map(altitudes[:1], **FLIGHT_MAP).node_images(0)[1]
+    assert np.all(wire.front_px <= alone.front_px + 1e-3)  # a cut span lies within the prior
+
+
+def test_a_wire_approached_level_keeps_its_whole_ray_when_cutting() -> None:
+    """No parallax (the wire level with the camera, approached head-on) cuts nothing, and
+    views that miss a wire rule out nothing: the depth prior stays whole."""
+    params = MappingParams(**FLIGHT_MAP, wire_parallax_views=24)  # type: ignore[arg-type]
+    rig = stereo_rig_from_params(params.camera)
+    height = 6.0
+    ends = [WIRE_NORTH_M, -40, -height], [WIRE_NORTH_M, 40, -height]
+    camera = SimulatedStereoCamera(
+        World(wires=[catenary_wire(*ends, 0.0, 0.02)]),
+        rig, body_from_camera_from_params(params.camera), CameraSimParams(), colour_downscale=2,
+    )  # fmt: skip
+    droan = DroanMap(rig, params)
+    for i in range(8):
+        frame = camera.render(0.1 * i, Pose.from_yaw_pitch_roll(0, 0, 0, [0.5 * i, 0, -height]))
+        mask = frame.wire_mask if i % 2 == 0 else np.zeros_like(frame.wire_mask)  # every other
+        droan.insert(frame.stamp_s, frame.world_from_camera, None, mask)
+    last_seen = 6 * 0.5
+    along = np.array([[last_seen + d, 0.0, -height] for d in (4.5, 6.0, 12.0, 18.0)])
+    prior = fused_map(np.array([height]), **FLIGHT_MAP)  # one view: the prior
+    shifted = along - [last_seen, 0, 0]
+    assert prior.query(shifted).collision.all()
+    assert droan.query(along).collision.all()  # the whole ray, 4.5-18 m ahead of the view
+    assert droan.query(np.array([[WIRE_NORTH_M, 0.0, -height]])).collision.all()
+
+
+def test_the_kept_wire_views_forget_the_one_nearest_another_so_parallax_stays() -> None:
+    grid = stereo_rig_from_params(MappingParams().camera).camera.scaled(4)
+    views = WireViews(grid, capacity=3, tolerance_cells=1, min_views=2)
+    cells = np.zeros(grid.shape, bool)
+    for i, (north, height) in enumerate([(0.0, 0.0), (0.0, 5.0), (1.0, 5.0), (1.2, 5.0)]):
+        views.add(float(i), Pose.from_yaw_pitch_roll(0, 0, 0, [north, 0, -height]), cells, None)
+    kept = [(v.centre_ned_m[0], -v.centre_ned_m[2]) for v in views._views]
+    assert kept == [(0.0, 0.0), (0.0, 5.0), (1.2, 5.0)]  # the climb's ends stay
+    views.prune(oldest_s=1.0)
+    assert len(views) == 2
 
 
 def test_the_wire_voxels_answer_exactly_within_their_radius() -> None:

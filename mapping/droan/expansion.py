@@ -165,6 +165,8 @@ class DisparityExpander:
         self.wire_front_px = float(self._front(np.float32(wire_disparity)))
         self.wire_back_px = float(self.bf_px_m / params.wire_depth_far_m)
         self._wire_levels = self._wire_expansion_levels()
+        # the nearest disparity of each level's window: the next level's lowest, or the prior's
+        self._wire_level_tops = [lvl[2] for lvl in self._wire_levels[1:]] + [wire_disparity]
 
     def _front(self, disparity_px: np.ndarray) -> np.ndarray:
         return front_disparity(
@@ -328,28 +330,72 @@ class DisparityExpander:
         mask = np.asarray(wire_mask, dtype=bool)
         return _pool(mask, self._wire_pool_factor(mask.shape), np.logical_or, False)
 
-    def expand_wire(self, wire_mask: np.ndarray) -> ExpandedImage:
+    def expand_wire(
+        self,
+        wire_mask: np.ndarray,
+        near_m: np.ndarray | None = None,
+        far_m: np.ndarray | None = None,
+    ) -> ExpandedImage:
         """Front/back images of a binary wire mask (4.4.3, Fig. 4.4).
 
         wire_mask: `(H, W) bool` on the disparity camera's pixels, or `(H / k, W / k)` for an
             integer k dividing `pool_factor`: a colour camera registered to the disparity
             camera at a k-times lower resolution (the CNN's input size), pooled by
             `pool_factor / k` onto the same grid.
-        Wire pixels span the depth prior [`wire_depth_near_m`, `wire_depth_far_m`]; the front
-        is the near limit depth-expanded like a stereo return. The area expansion is the one
-        of eq. 4.3 at each depth of the slab, not only at its near limit (beyond the thesis):
-        a cell the expansion reaches only at nearer depths has its back limit there. At the
-        near limit's width throughout, a wire (or a false one on the horizon) 10-20 m away
-        filled a wedge two to five times the vehicle's size, which views from a metre higher or
-        lower could not vote away (the vehicle climbed after it, 10 m in the fault field).
-        Cells away from any wire are 0 (no wire).
+        near_m, far_m: `(Hc, Wc)` span of each wire cell's ray on the grid, m (`wire_depth`);
+            None: the depth prior [`wire_depth_near_m`, `wire_depth_far_m`] everywhere.
+        Wire cells span their depths; the front is the near limit depth-expanded like a stereo
+        return. The area expansion is the one of eq. 4.3 at each depth of the span, not only
+        at its near limit (beyond the thesis): a cell the expansion reaches only at nearer
+        depths has its back limit there. At the near limit's width throughout, a wire (or a
+        false one on the horizon) 10-20 m away filled a wedge two to five times the vehicle's
+        size, which views from a metre higher or lower could not vote away (the vehicle climbed
+        after it, 10 m in the fault field). Cells away from any wire are 0 (no wire).
         """
-        pooled = self.pooled_wire_mask(wire_mask).astype(np.float32)
+        pooled = self.pooled_wire_mask(wire_mask)
+        prior = pooled if near_m is None else pooled & ~self._is_cut(near_m, far_m)
         back = np.zeros(pooled.shape, np.float32)
-        reached, reach_u, reach_v = pooled, 0, 0
+        reached, reach_u, reach_v = prior.astype(np.float32), 0, 0
         for half_u, half_v, back_px in self._wire_levels:  # nested windows: grow step by step
             reached = _morph(reached, half_u - reach_u, half_v - reach_v, dilate=True)
             reach_u, reach_v = half_u, half_v
             back[(reached > 0) & (back == 0)] = back_px
         front = np.where(back > 0, np.float32(self.wire_front_px), np.float32(0))
+        if near_m is not None and far_m is not None and (cut := pooled & ~prior).any():
+            cut_front, cut_back = self._expand_spans(cut, near_m, far_m)
+            hit = cut_front > 0
+            front = np.maximum(front, cut_front)
+            back[hit] = np.where(back[hit] > 0, np.minimum(back[hit], cut_back[hit]), cut_back[hit])
         return ExpandedImage(front, back)
+
+    def _is_cut(self, near_m: np.ndarray, far_m: np.ndarray) -> np.ndarray:
+        """`(Hc, Wc) bool`: a span narrower than the depth prior."""
+        with np.errstate(invalid="ignore"):
+            return (near_m > self.params.wire_depth_near_m) | (far_m < self.params.wire_depth_far_m)
+
+    def _expand_spans(
+        self, cells: np.ndarray, near_m: np.ndarray, far_m: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Front and back images (0 where unreached) of the wire `cells` whose rays span
+        [`near_m`, `far_m`]: each level's window (eq. 4.3 at its depths) around the cells
+        whose span reaches into the level's depths, with the span's depths clipped to them."""
+        bf = np.float32(self.bf_px_m)
+        span_front = np.where(cells, bf / np.where(cells, near_m, 1).astype(np.float32), 0)
+        span_back = np.where(cells, bf / np.where(cells, far_m, 1).astype(np.float32), np.inf)
+        front = np.zeros(cells.shape, np.float32)
+        back = np.full(cells.shape, np.inf, np.float32)
+        for (half_u, half_v, low_px), high_px in zip(
+            self._wire_levels, self._wire_level_tops, strict=True
+        ):
+            inside = cells & (span_back <= high_px) & (span_front >= low_px)
+            if not inside.any():
+                continue
+            nearest = np.where(inside, np.minimum(span_front, high_px), np.float32(0))
+            farthest = np.where(inside, np.maximum(span_back, low_px), np.float32(np.inf))
+            front = np.maximum(front, _morph(nearest, half_u, half_v, dilate=True))
+            back = np.minimum(back, _morph(farthest, half_u, half_v, dilate=False))
+        reached = front > 0
+        return (
+            np.where(reached, self._front(front), np.float32(0)).astype(np.float32),
+            np.where(reached, back, np.float32(0)).astype(np.float32),
+        )

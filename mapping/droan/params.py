@@ -92,7 +92,25 @@ class MappingParams(BaseModel):
         ge=0,
         le=4,
         description="a view's wire cells are dilated by this many expansion-grid cells before "
-        "it votes on a candidate (wire_triangulation): the mask's and the pose's error, cells",
+        "it votes on a candidate (wire_triangulation) or on the depths of another view's wire "
+        "rays (wire_parallax_views): the mask's and the pose's error, cells",
+    )
+    wire_parallax_views: int = Field(
+        0,
+        ge=0,
+        le=64,
+        description="keyframes whose wire cells cut a new view's wire rays to the depths they "
+        "do not rule out, before the C-space expansion (`mapping.droan.wire_depth`; the views "
+        "nearest another are forgotten first, so those with parallax stay); 0: every wire ray "
+        "spans the whole depth prior (4.4.3), count",
+    )
+    wire_parallax_min_views: int = Field(
+        2,
+        ge=1,
+        le=256,
+        description="views that saw a wire at its ray's best depth (where most views saw it) "
+        "but not at another depth they looked at, needed to rule that depth out "
+        "(wire_parallax_views), count",
     )
     wire_depth_near_m: float = Field(4.0, gt=0, description="wire depth prior, near limit (4.4.3)")
     wire_depth_far_m: float = Field(20.0, gt=0, description="wire depth prior, far limit (4.4.3)")

@@ -32,6 +32,7 @@ from geometry.pose import Pose
 from mapping.droan.expansion import DisparityExpander, ExpandedImage
 from mapping.droan.occupancy import summed_costs
 from mapping.droan.params import MappingParams
+from mapping.droan.wire_depth import WireViews
 from mapping.droan.wire_triangulation import WireVoxels, thin_wire_cells
 from mapping.query import OccupancyQuery
 
@@ -89,6 +90,19 @@ class DroanMap:
             if params.wire_triangulation
             else None
         )
+        self.wire_views = (
+            WireViews(
+                self.grid_camera,
+                params.wire_parallax_views,
+                params.wire_ray_tolerance_cells,
+                params.wire_parallax_min_views,
+            )
+            if params.wire_parallax_views > 0
+            else None
+        )
+        self._wire_prior_m = (params.wire_depth_near_m, params.wire_depth_far_m)
+        self._wire_cells: list[np.ndarray | None] = [None] * n  # pooled, when cutting rays
+        self._cut_s = np.zeros(n)  # when each node's wire rays were last cut
         self._occupancy(np.zeros((0, 3)))  # compile (or load) the query kernel now, not in flight
 
     # --- graph ---------------------------------------------------------------------------
@@ -106,14 +120,20 @@ class DroanMap:
         self._slots = [None] * len(self._slots)
         self._order = []
         self._active = np.zeros(0, dtype=np.intp)
+        self._wire_cells = [None] * len(self._slots)
         if self.wire_voxels is not None:
             self.wire_voxels.clear()
+        if self.wire_views is not None:
+            self.wire_views.clear()
 
     def memory_bytes(self) -> int:
         """Bytes held by node images and poses (preallocated for `max_nodes`), and by the
-        wire voxels when triangulating."""
+        wire voxels when triangulating or the kept wire views when cutting wire rays."""
         voxels = 0 if self.wire_voxels is None else self.wire_voxels.memory_bytes()
-        return self._images.nbytes + self._projection.nbytes + self._offset.nbytes + voxels
+        views = 0 if self.wire_views is None else self.wire_views.memory_bytes()
+        cells = sum(c.nbytes for c in self._wire_cells if c is not None)
+        nodes = self._images.nbytes + self._projection.nbytes + self._offset.nbytes
+        return nodes + voxels + views + cells
 
     def prune(self, now_s: float) -> None:
         """Evict nodes older than `max_node_age_s` (when that limit is set)."""
@@ -122,6 +142,8 @@ class DroanMap:
         oldest_s = now_s - self.params.max_node_age_s
         self._order = [i for i in self._order if self._slots[i].stamp_s >= oldest_s]  # type: ignore[union-attr]
         self._active = np.array(self._order, dtype=np.intp)
+        if self.wire_views is not None:
+            self.wire_views.prune(oldest_s)
 
     def _is_keyframe(self, world_from_camera: Pose) -> bool:
         keyframes = [self._slots[i] for i in self._order if self._slots[i].keyframe]  # type: ignore[union-attr]
@@ -176,9 +198,17 @@ class DroanMap:
         if wire_mask is not None and self.wire_voxels is not None:
             self._vote_wires(slot, keyframe, world_from_camera, wire_mask, possible_mask)
             wire_mask = possible_mask = None  # the voxels hold its wire evidence
-        self._write(slot, world_from_camera, disparity_px, wire_mask, possible_mask)
+        spans = None
+        self._wire_cells[slot] = None
+        if wire_mask is not None and self.wire_views is not None:
+            spans = self._cut_wire_rays(
+                slot, stamp_s, keyframe, world_from_camera, wire_mask, possible_mask
+            )
+        self._write(slot, world_from_camera, disparity_px, wire_mask, possible_mask, spans)
         self._order.append(slot)
         self._active = np.array(self._order, dtype=np.intp)
+        if self.wire_views is not None:
+            self._recut_stalest(stamp_s)
         return InsertResult.KEYFRAME if keyframe else InsertResult.LIVE
 
     def _write(
@@ -188,6 +218,7 @@ class DroanMap:
         disparity_px: np.ndarray | None,
         wire_mask: np.ndarray | None,
         possible_mask: np.ndarray | None,
+        spans: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         images = self._node_view(slot)
         images.fill(-1.0)
@@ -196,7 +227,7 @@ class DroanMap:
             images[..., 0], images[..., 1] = stereo.front_px, stereo.back_px
             images[..., 2], images[..., 3] = stereo.own_front_px, stereo.own_back_px
         if wire_mask is not None:
-            wire = self.expander.expand_wire(wire_mask)
+            wire = self.expander.expand_wire(wire_mask, *(spans or (None, None)))
             images[..., 4], images[..., 5] = wire.front_px, wire.back_px
             if possible_mask is not None and (possible_mask & ~wire_mask).any():
                 possible = self.expander.expand_wire(possible_mask | wire_mask)
@@ -205,6 +236,45 @@ class DroanMap:
         k = self.grid_camera.intrinsic_matrix()
         self._projection[slot] = k @ camera_from_world.rotation
         self._offset[slot] = k @ camera_from_world.translation_m
+
+    def _cut_wire_rays(
+        self,
+        slot: int,
+        stamp_s: float,
+        keyframe: bool,
+        world_from_camera: Pose,
+        wire_mask: np.ndarray,
+        possible_mask: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The depth spans of a frame's wire rays cut by the kept views (`wire_depth`); a
+        keyframe's cells are kept for the next frames, and the node's for `_recut_stalest`."""
+        views = self.wire_views
+        assert views is not None
+        pooled = self.expander.pooled_wire_mask
+        cells = pooled(wire_mask)
+        self._wire_cells[slot], self._cut_s[slot] = cells, stamp_s
+        spans = views.depth_limits(world_from_camera, cells, *self._wire_prior_m)
+        if keyframe:
+            possible = None if possible_mask is None else pooled(possible_mask | wire_mask)
+            views.add(stamp_s, world_from_camera, cells, possible)
+        return spans
+
+    def _recut_stalest(self, now_s: float) -> None:
+        """Cut again the wire rays of the older node whose cut is the oldest, with the views
+        kept now: a node inserted early in a climb was cut by the few views before it, and
+        the views after it hold the parallax (one node per insert, each in turn)."""
+        views = self.wire_views
+        older = [i for i in self._order[:-1] if self._wire_cells[i] is not None]
+        if views is None or not older:
+            return
+        slot = min(older, key=lambda i: self._cut_s[i])
+        cells, node = self._wire_cells[slot], self._slots[slot]
+        assert cells is not None and node is not None
+        spans = views.depth_limits(node.world_from_camera, cells, *self._wire_prior_m)
+        wire = self.expander.expand_wire(cells, *spans)
+        images = self._node_view(slot)
+        images[..., 4], images[..., 5] = wire.front_px, wire.back_px
+        self._cut_s[slot] = now_s
 
     def _vote_wires(
         self,
