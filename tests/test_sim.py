@@ -15,7 +15,12 @@ import pytest
 from typer.testing import CliRunner
 
 from companion.cli import app
-from companion.cli.sim import sweep_specs, sweep_summary, verdict_text
+from companion.cli.sim import (
+    keep_recording_of_failure,
+    sweep_specs,
+    sweep_summary,
+    verdict_text,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 PX4_SITL = REPO.parent / "shared" / "px4-sitl"
@@ -122,8 +127,9 @@ def test_the_sweep_summary_counts_failures_and_clearances() -> None:
     assert summary["min_wire_clearance_m"] == 1.0
     assert summary["frame_to_setpoint_ms_p99_max"] == 120.0
     assert summary["failures"] == [
-        {"scenario": "b", "seed": 1, "collisions": 1, "mission_state": None, "failure": "x"}
-    ]
+        {"scenario": "b", "seed": 1, "collisions": 1, "mission_state": None, "failure": "x",
+         "recording": None}
+    ]  # fmt: skip
 
 
 def test_a_sweep_can_extend_an_earlier_one_by_its_first_seed() -> None:
@@ -132,6 +138,21 @@ def test_a_sweep_can_extend_an_earlier_one_by_its_first_seed() -> None:
     assert {(s.config, s.inference_threads, s.world_file) for s in specs} == {("s.toml", 1, None)}
     result = CliRunner().invoke(app, ["sweep", "--first-seed", "-1", "--json"])
     assert result.exit_code == 2 and "--first-seed" in result.output
+
+
+def test_a_sweep_keeps_only_the_recordings_of_its_failed_flights(tmp_path: Path) -> None:
+    specs = sweep_specs(["a"], range(2), None, 1, tmp_path)
+    assert [s.record for s in specs] == [str(tmp_path / "a-0.mcap"), str(tmp_path / "a-1.mcap")]
+    for spec in specs:  # a recording split in two parts
+        Path(spec.record).write_bytes(b"x")
+        Path(spec.record).with_name(Path(spec.record).stem + "-001.mcap").write_bytes(b"x")
+    passed = keep_recording_of_failure(specs[0], {"success": True})
+    failed = keep_recording_of_failure(specs[1], {"success": False, "collisions": 1})
+    assert "recording" not in passed and failed["recording"] == specs[1].record
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-1-001.mcap", "a-1.mcap"]
+    assert sweep_summary([{**failed, "scenario": "a", "seed": 1}])["failures"][0]["recording"]
+    result = CliRunner().invoke(app, ["sweep", "--record-failures", specs[1].record])
+    assert result.exit_code == 2  # a directory, not a file that exists
 
 
 @pytest.fixture()

@@ -28,6 +28,7 @@ from companion.cli.sim_options import (
     ViewPortOption,
     checked_faults,
 )
+from companion.record.reader import recording_parts
 
 
 @dataclass(frozen=True)
@@ -271,12 +272,27 @@ def sim(
 
 
 def _fly_quietly(spec: FlightSpec) -> dict:
-    """A sweep's flight in a worker process: the verdict, or the error that stopped it."""
+    """A sweep's flight in a worker process: the verdict, or the error that stopped it; its
+    recording (if any) kept only when it failed."""
     try:
-        return fly_and_judge(spec)
+        result = fly_and_judge(spec)
     except Exception as e:  # one broken flight must not end the sweep
-        return {"success": False, "scenario": spec.scenario, "seed": spec.seed,
-                "collisions": 0, "failure": f"{type(e).__name__}: {e}"}  # fmt: skip
+        result = {"success": False, "scenario": spec.scenario, "seed": spec.seed,
+                  "collisions": 0, "failure": f"{type(e).__name__}: {e}"}  # fmt: skip
+    return keep_recording_of_failure(spec, result)
+
+
+def keep_recording_of_failure(spec: FlightSpec, result: dict) -> dict:
+    """`result` with the flight's recording: deleted (every part) when the flight succeeded,
+    else its path as `recording`. A sweep flight is not deterministic (lockstep charges the
+    stack's compute to simulated time), so a failure is replayed from its recording."""
+    if spec.record is None or not Path(spec.record).exists():
+        return result
+    if result["success"]:
+        for part in recording_parts(spec.record):
+            part.unlink()
+        return result
+    return {**result, "recording": spec.record}
 
 
 _FLIGHT_KEYS = ("scenario", "seed", "success", "collisions", "min_clearance_m",
@@ -303,7 +319,10 @@ def sweep_summary(results: list[dict]) -> dict:
         "min_wire_clearance_m": min(wires) if wires else None,
         "frame_to_setpoint_ms_p99_max": max(latencies) if latencies else None,
         "failures": [
-            {k: r.get(k) for k in ("scenario", "seed", "collisions", "mission_state", "failure")}
+            {
+                k: r.get(k)
+                for k in ("scenario", "seed", "collisions", "mission_state", "failure", "recording")
+            }
             for r in results
             if not r["success"]
         ],
@@ -312,12 +331,24 @@ def sweep_summary(results: list[dict]) -> dict:
 
 
 def sweep_specs(
-    names: list[str], seeds: range, config: Path | None, threads: int | None
+    names: list[str],
+    seeds: range,
+    config: Path | None,
+    threads: int | None,
+    record_dir: Path | None = None,
 ) -> list[FlightSpec]:
-    """One flight of each scenario in `names` with each seed, scenario by scenario."""
+    """One flight of each scenario in `names` with each seed, scenario by scenario, each
+    recorded to `record_dir`/SCENARIO-SEED.mcap when given."""
     settings = str(config) if config else None
     return [
-        FlightSpec(name, seed, None, settings, inference_threads=threads)
+        FlightSpec(
+            name,
+            seed,
+            None,
+            settings,
+            inference_threads=threads,
+            record=None if record_dir is None else str(record_dir / f"{name}-{seed}.mcap"),
+        )
         for name in names
         for seed in seeds
     ]
@@ -347,6 +378,15 @@ def sweep(
     ] = None,
     json_output: Annotated[bool, typer.Option("--json", help="one JSON object on stdout")] = False,
     config: ConfigOption = None,
+    record_failures: Annotated[
+        Path | None,
+        typer.Option(
+            "--record-failures",
+            file_okay=False,
+            help="record every flight to DIR/SCENARIO-SEED.mcap and keep the recordings of "
+            "the failed ones (`recording` in the JSON's failures), for `wireavoid replay`",
+        ),
+    ] = None,
 ) -> None:
     """Fly many seeded scenarios and report the success rate (exit 0 when all succeeded)."""
     from hil.world.scenarios import SCENARIOS
@@ -357,7 +397,10 @@ def sweep(
         raise typer.BadParameter(f"unknown scenarios {unknown}; one of {', '.join(SCENARIOS)}")
     # the flights share this machine's cores: each CNN gets its share of them, not all
     threads = None if address else max(1, (os.cpu_count() or 1) // jobs)
-    specs = sweep_specs(names, range(first_seed, first_seed + seeds), config, threads)
+    if record_failures is not None:
+        record_failures.mkdir(parents=True, exist_ok=True)
+    seed_range = range(first_seed, first_seed + seeds)
+    specs = sweep_specs(names, seed_range, config, threads, record_failures)
     results = _run_on_ray(specs, address) if address else _run_locally(specs, jobs)
     summary = sweep_summary(results)
     if json_output:
