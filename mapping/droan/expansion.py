@@ -331,10 +331,7 @@ class DisparityExpander:
         return _pool(mask, self._wire_pool_factor(mask.shape), np.logical_or, False)
 
     def expand_wire(
-        self,
-        wire_mask: np.ndarray,
-        near_m: np.ndarray | None = None,
-        far_m: np.ndarray | None = None,
+        self, wire_mask: np.ndarray, spans_m: tuple[np.ndarray, np.ndarray] | None = None
     ) -> ExpandedImage:
         """Front/back images of a binary wire mask (4.4.3, Fig. 4.4).
 
@@ -342,8 +339,9 @@ class DisparityExpander:
             integer k dividing `pool_factor`: a colour camera registered to the disparity
             camera at a k-times lower resolution (the CNN's input size), pooled by
             `pool_factor / k` onto the same grid.
-        near_m, far_m: `(Hc, Wc)` span of each wire cell's ray on the grid, m (`wire_depth`);
-            None: the depth prior [`wire_depth_near_m`, `wire_depth_far_m`] everywhere.
+        spans_m: `(Hc, Wc)` near and far depth of each wire cell's ray on the grid, m
+            (`wire_depth`); None: the depth prior [`wire_depth_near_m`, `wire_depth_far_m`]
+            everywhere.
         Wire cells span their depths; the front is the near limit depth-expanded like a stereo
         return. The area expansion is the one of eq. 4.3 at each depth of the span, not only
         at its near limit (beyond the thesis): a cell the expansion reaches only at nearer
@@ -353,7 +351,7 @@ class DisparityExpander:
         after it, 10 m in the fault field). Cells away from any wire are 0 (no wire).
         """
         pooled = self.pooled_wire_mask(wire_mask)
-        prior = pooled if near_m is None else pooled & ~self._is_cut(near_m, far_m)
+        prior = pooled if spans_m is None else pooled & ~self._is_cut(*spans_m)
         back = np.zeros(pooled.shape, np.float32)
         reached, reach_u, reach_v = prior.astype(np.float32), 0, 0
         for half_u, half_v, back_px in self._wire_levels:  # nested windows: grow step by step
@@ -361,8 +359,8 @@ class DisparityExpander:
             reach_u, reach_v = half_u, half_v
             back[(reached > 0) & (back == 0)] = back_px
         front = np.where(back > 0, np.float32(self.wire_front_px), np.float32(0))
-        if near_m is not None and far_m is not None and (cut := pooled & ~prior).any():
-            cut_front, cut_back = self._expand_spans(cut, near_m, far_m)
+        if spans_m is not None and (cut := pooled & ~prior).any():
+            cut_front, cut_back = self._expand_spans(cut, *spans_m)
             hit = cut_front > 0
             front = np.maximum(front, cut_front)
             back[hit] = np.where(back[hit] > 0, np.minimum(back[hit], cut_back[hit]), cut_back[hit])

@@ -227,7 +227,7 @@ class DroanMap:
             images[..., 0], images[..., 1] = stereo.front_px, stereo.back_px
             images[..., 2], images[..., 3] = stereo.own_front_px, stereo.own_back_px
         if wire_mask is not None:
-            wire = self.expander.expand_wire(wire_mask, *(spans or (None, None)))
+            wire = self.expander.expand_wire(wire_mask, spans)
             images[..., 4], images[..., 5] = wire.front_px, wire.back_px
             if possible_mask is not None and (possible_mask & ~wire_mask).any():
                 possible = self.expander.expand_wire(possible_mask | wire_mask)
@@ -271,7 +271,7 @@ class DroanMap:
         cells, node = self._wire_cells[slot], self._slots[slot]
         assert cells is not None and node is not None
         spans = views.depth_limits(node.world_from_camera, cells, *self._wire_prior_m)
-        wire = self.expander.expand_wire(cells, *spans)
+        wire = self.expander.expand_wire(cells, spans)
         images = self._node_view(slot)
         images[..., 4], images[..., 5] = wire.front_px, wire.back_px
         self._cut_s[slot] = now_s
