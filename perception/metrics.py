@@ -233,3 +233,50 @@ def metrics_from_counts(
         tolerance_px=int(tolerance_px),
         n_images=len(per_image),
     )
+
+
+_RECALL_TOLERANCE_PX = 2
+_FALSE_DISTANCE_PX = 4
+_FALSE_FRAME_PX = 50
+
+
+@dataclass(frozen=True)
+class MaskScore:
+    """Summed counts of binary wire masks against true wire masks (the mask the map gets,
+    not a probability map): true wire pixels and those within 2 px of the mask, mask pixels
+    and those farther than 4 px from any wire, frames and frames with over 50 such pixels."""
+
+    wire_px: int = 0
+    wire_found_px: int = 0
+    mask_px: int = 0
+    false_px: int = 0
+    frames: int = 0
+    frames_with_false: int = 0
+
+    @classmethod
+    def of(cls, mask: np.ndarray, truth: np.ndarray) -> MaskScore:
+        """The counts of one (H, W) bool `mask` against its (H, W) bool `truth`."""
+        mask, truth = np.asarray(mask, bool), np.asarray(truth, bool)
+        near_mask = cv2.dilate(mask.astype(np.uint8), disk_kernel(_RECALL_TOLERANCE_PX)) > 0
+        near_wire = cv2.dilate(truth.astype(np.uint8), disk_kernel(_FALSE_DISTANCE_PX)) > 0
+        false_px = int((mask & ~near_wire).sum())
+        return cls(
+            int(truth.sum()),
+            int((truth & near_mask).sum()),
+            int(mask.sum()),
+            false_px,
+            1,
+            int(false_px > _FALSE_FRAME_PX),
+        )
+
+    def __add__(self, other: MaskScore) -> MaskScore:
+        pairs = zip(vars(self).values(), vars(other).values(), strict=True)
+        return MaskScore(*(a + b for a, b in pairs))
+
+    def summary(self) -> dict[str, float | int]:
+        """`wire_recall`, `false_share` (of mask pixels) and `frames_with_false_marks`."""
+        return {
+            "wire_recall": round(self.wire_found_px / max(self.wire_px, 1), 4),
+            "false_share": round(self.false_px / max(self.mask_px, 1), 4),
+            "frames_with_false_marks": self.frames_with_false,
+        }

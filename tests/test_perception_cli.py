@@ -203,3 +203,15 @@ def test_evaluate_at_a_size_resizes_images_and_masks(tmp_path, checkpoint):
     assert record["size"] == "30x40" and record["rows"][0]["ap"] > 0.9  # 1-px wires still found
     result = runner.invoke(app, [*args, "--size", "thirty", "--out", str(out)])
     assert result.exit_code == 2 and "--size must be HxW" in result.output
+
+
+def test_evaluate_sim_scores_the_shipped_mask_on_rendered_frames():
+    args = ["evaluate-sim", "--scenario", "ladder-wire", "--seeds", "1", "--frames", "3"]
+    result = runner.invoke(app, [*args, "--json"])
+    assert result.exit_code == 0, result.output
+    scores = json.loads(result.output)
+    assert scores["frames"] == 3 and scores["scenarios"] == ["ladder-wire"]
+    assert 0.0 < scores["wire_recall"] <= scores["wire_recall_continued"]  # it only adds pixels
+    assert scores["frames_with_false_marks"] <= scores["frames_with_false_marks_continued"] <= 3
+    bad = runner.invoke(app, ["evaluate-sim", "--scenario", "nowhere"])
+    assert bad.exit_code == 2 and "unknown scenario 'nowhere'" in bad.output

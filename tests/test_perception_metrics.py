@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from perception.metrics import (
+    MaskScore,
     average_precision,
     default_thresholds,
     disk_kernel,
@@ -174,3 +175,22 @@ def test_ois_ignores_an_image_whose_wire_is_never_hit():
     # image 2 sits at threshold 1.0: no prediction, its 4 wire pixels missed -> R = 1/2, P = 1
     assert m.ois_f1 == pytest.approx(2 / 3)
     assert m.ois_f1 >= m.ods_f1
+
+
+def test_mask_score_counts_recall_within_2_px_and_false_marks_beyond_4_px():
+    truth = np.zeros((40, 100), bool)
+    truth[20, 10:90] = True  # an 80 px wire
+    mask = np.zeros_like(truth)
+    mask[22, 10:50] = True  # its left half, 2 px off: found
+    mask[26, 50:70] = True  # 6 px off: neither finds the wire nor lies near it
+    mask[5, 0:60] = True  # a false line in the sky
+    one = MaskScore.of(mask, truth)
+    assert (one.wire_px, one.wire_found_px, one.mask_px, one.false_px) == (80, 40, 120, 80)
+    assert (one.frames, one.frames_with_false) == (1, 1)
+    two = one + MaskScore.of(truth, truth)
+    assert two.summary() == {
+        "wire_recall": 0.75,
+        "false_share": round(80 / 200, 4),
+        "frames_with_false_marks": 1,
+    }
+    assert MaskScore().summary()["wire_recall"] == 0.0
