@@ -36,23 +36,15 @@ def run_camera_benchmark(settings: Any, scenario: str, seed: int, frames: int) -
     10 Hz (plus one warm-up); returns the JSON-ready timings."""
     import cv2
 
-    from geometry.camera import body_from_camera_from_params, stereo_rig_from_params
+    from companion.cli.sim_camera import settings_camera
     from geometry.pose import Pose
-    from hil.sensors.cameras import SimulatedStereoCamera
     from hil.world.scenarios import build_scenario
 
     cv2.setNumThreads(1)
-    params = settings.mapping
-    rig = stereo_rig_from_params(params.camera)
     world = build_scenario(scenario, seed)
     start_build = time.perf_counter()
-    camera = SimulatedStereoCamera(
-        world,
-        rig,
-        body_from_camera_from_params(params.camera),
-        settings.camera_sim,
-        colour_downscale=settings.camera.colour_downscale,
-    )
+    camera = settings_camera(settings, world)
+    rig = camera.rig
     setup_ms = 1e3 * (time.perf_counter() - start_build)
     start = world.takeoff_point_ned_m
     goal = world.goals_ned_m[0]

@@ -23,19 +23,12 @@ _SCENARIOS = ["ladder-wire", "stacked-wires", "power-line-corridor", "random"]
 
 def scenario_frames(settings: Any, scenario: str, seed: int, count: int) -> list[tuple[Any, Any]]:
     """`count` (image_bgr, true wire mask) colour frames of `scenario` (seed) from drawn poses."""
-    from geometry.camera import body_from_camera_from_params, stereo_rig_from_params
+    from companion.cli.sim_camera import settings_camera
     from geometry.pose import Pose
-    from hil.sensors.cameras import SimulatedStereoCamera
     from hil.world.scenarios import build_scenario
 
     world = build_scenario(scenario, seed)
-    camera = SimulatedStereoCamera(
-        world,
-        stereo_rig_from_params(settings.mapping.camera),
-        body_from_camera_from_params(settings.mapping.camera),
-        settings.camera_sim,
-        colour_downscale=settings.camera.colour_downscale,
-    )
+    camera = settings_camera(settings, world)
     rng = np.random.default_rng([seed, count])
     start, goal = world.takeoff_point_ned_m, np.asarray(world.goals_ned_m[0], float)
     frames = []

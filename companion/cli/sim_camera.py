@@ -15,11 +15,28 @@ from collections.abc import Callable
 
 import numpy as np
 
+from companion.cli.settings import SimSettings
 from companion.clock import Clock
 from companion.ingest.frames import CameraError, CameraFrame
+from geometry.camera import body_from_camera_from_params, stereo_rig_from_params
 from geometry.pose import Pose
 from hil.lockstep import LockstepClock
 from hil.sensors.cameras import SimulatedStereoCamera
+from hil.world.model import World
+
+
+def settings_camera(settings: SimSettings, world: World) -> SimulatedStereoCamera:
+    """The simulated cameras of `world` as `settings` configure the rig, its mount on the body,
+    the stereo matcher and the colour camera's down-scale (`mapping`, `camera_sim`, `camera`)."""
+    return SimulatedStereoCamera(
+        world,
+        stereo_rig_from_params(settings.mapping.camera),
+        body_from_camera_from_params(settings.mapping.camera),
+        settings.camera_sim,
+        settings.mapping.stereo,
+        settings.mapping.camera_max_disparity_px,
+        colour_downscale=settings.camera.colour_downscale,
+    )
 
 
 class SimulatedCameraSource:

@@ -28,18 +28,16 @@ import numpy as np
 
 from companion.cli.settings import SimSettings
 from companion.cli.sim_addons import FlightAddon
-from companion.cli.sim_camera import SimulatedCameraSource
+from companion.cli.sim_camera import SimulatedCameraSource, settings_camera
 from companion.clock import Clock, WallClock, wait_or_timeout
 from companion.flight.process import FlightProcess, FlightReport
 from companion.flight.vehicle_check import check_vehicle
 from companion.link.vehicle_link import LinkError, LinkEvent, VehicleLink
 from companion.mission import AIRBORNE
-from geometry.camera import body_from_camera_from_params, stereo_rig_from_params
 from geometry.pose import Pose
 from hil.lockstep import LockstepClock
 from hil.mavlink.server import VehicleServer
 from hil.px4_truth import Px4TruthTap, sih_truth_port
-from hil.sensors.cameras import SimulatedStereoCamera
 from hil.world.model import World
 from perception.segmenter import WireSegmenter
 
@@ -136,17 +134,12 @@ async def fly_world(
     )
     tap = await _px4_truth_tap(connect_url) if server is None and sim.px4_ground_truth else None
     truth = _TruthSampler(server, link, world, clock, tap)
-    renderer = SimulatedStereoCamera(
-        world,
-        stereo_rig_from_params(settings.mapping.camera),
-        body_from_camera_from_params(settings.mapping.camera),
-        settings.camera_sim,
-        settings.mapping.stereo,
-        settings.mapping.camera_max_disparity_px,
-        colour_downscale=settings.camera.colour_downscale,
-    )
     camera = SimulatedCameraSource(
-        renderer, truth.world_from_body, clock, settings.camera.frame_rate_hz, sim.camera_latency_s
+        settings_camera(settings, world),
+        truth.world_from_body,
+        clock,
+        settings.camera.frame_rate_hz,
+        sim.camera_latency_s,
     )
     for addon in addons:
         camera = addon.camera(camera, clock)
