@@ -228,6 +228,21 @@ class SyntheticParams(BaseModel):
         description="share of aerial views in which wires and poles cast shadows on the ground "
         "(thin dark lines, never labelled)",
     )
+    ground_shadow_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of forward views over procedural ground in which wires and poles "
+        "cast shadows on the ground below the horizon (thin dark lines, never labelled)",
+    )
+    perspective_cloud_probability: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of cloudy procedural skies whose clouds lie on a layer far above, "
+        "seen in perspective: streaks with sharp lower edges towards the horizon (never "
+        "labelled); the rest are flat fractal clouds",
+    )
     fittings_probability: float = Field(
         0.0,
         ge=0,

@@ -6,7 +6,8 @@ import pytest
 
 from geometry.camera import PinholeCamera
 from perception.params import SyntheticParams
-from perception.training.backgrounds import Horizon, add_distractors
+from perception.training import synthetic
+from perception.training.backgrounds import Horizon, add_distractors, perspective_clouds
 from perception.training.labels import label_mask, rasterise
 from perception.training.loop import HELD_OUT_SEED
 from perception.training.synthetic import (
@@ -293,4 +294,46 @@ def test_horizon_wire_option_labels_wires_and_leaves_other_seeds_unchanged():
     # no extra random draw when the option is off: earlier seeds render as before
     off = SyntheticParams(horizon_wire_probability=0.0)
     a, b = synthetic_sample(5, 1, 48, 64, off), synthetic_sample(5, 1, 48, 64)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_perspective_clouds_flatten_into_streaks_towards_the_horizon_and_stay_above_it():
+    horizon = Horizon(v_center_px=150.0, slope=0.0, focal_px=160.0)
+
+    def anisotropy(band: np.ndarray) -> float:
+        """Mean vertical over mean horizontal gradient: cot(elevation) for a flat layer."""
+        return float(np.abs(np.diff(band, axis=0)).mean() / np.abs(np.diff(band, axis=1)).mean())
+
+    low, high = [], []
+    for seed in range(8):
+        cover = perspective_clouds(np.random.default_rng(seed), 200, 320, horizon)
+        assert cover.shape == (200, 320) and cover[151:].max() == 0.0  # none below the horizon
+        low.append(anisotropy(cover[122:136]))  # 5-10 deg above the horizon: cot 5.7-11
+        high.append(anisotropy(cover[0:30]))  # 37-43 deg: cot 1.1-1.3
+    assert np.median(low) > 3.5 and np.median(low) > 2.5 * np.median(high)
+
+
+def test_ground_shadows_darken_forward_views_below_the_horizon_and_are_never_labelled(
+    monkeypatch,
+):
+    drawn, synthetic_draw_shadows = [], synthetic.draw_shadows
+
+    def recorded(img, ground, *args):
+        before = img.copy()
+        synthetic_draw_shadows(img, ground, *args)
+        drawn.append((ground, before.sum(axis=2) - img.sum(axis=2) > 0.02))
+
+    monkeypatch.setattr(synthetic, "draw_shadows", recorded)
+    p = SyntheticParams(ground_shadow_probability=1.0, photo_probability=0.0, no_wire_probability=0)
+    darker_px, labelled_px = 0, 0
+    for i in range(16):
+        _, mask, _ = rendered_sample(3, i, 96, 128, p)
+        ground, dark = drawn[-1]
+        assert not dark[~ground].any()  # only the ground below the horizon is shaded
+        darker_px += int(dark.sum())
+        labelled_px += int((dark & (mask > 0)).sum())
+    assert len(drawn) == 16 and darker_px > 300 and labelled_px < 0.1 * darker_px
+    # no extra random draw when both options are off: earlier seeds render as before
+    a = synthetic_sample(5, 2, 48, 64, SyntheticParams(perspective_cloud_probability=0.0))
+    b = synthetic_sample(5, 2, 48, 64)
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])

@@ -184,6 +184,14 @@ def train(
         float,
         typer.Option(min=0, max=1, help="least luminance difference of those horizon wires"),
     ] = _SYNTHETIC.horizon_contrast_min,
+    ground_shadow_probability: Annotated[
+        float,
+        typer.Option(min=0, max=1, help="share of forward views with wire shadows on the ground"),
+    ] = _SYNTHETIC.ground_shadow_probability,
+    perspective_cloud_probability: Annotated[
+        float,
+        typer.Option(min=0, max=1, help="share of cloudy skies with clouds in perspective"),
+    ] = _SYNTHETIC.perspective_cloud_probability,
     fittings_probability: Annotated[
         float, typer.Option(min=0, max=1, help="share of bundles with insulators and spacers")
     ] = _SYNTHETIC.fittings_probability,
@@ -243,6 +251,8 @@ def train(
         aerial_probability=aerial_probability,
         horizon_wire_probability=horizon_wire_probability,
         horizon_contrast_min=horizon_contrast_min,
+        ground_shadow_probability=ground_shadow_probability,
+        perspective_cloud_probability=perspective_cloud_probability,
         fittings_probability=fittings_probability,
         tower_probability=tower_probability,
         sensor_effects_probability=sensor_effects_probability,

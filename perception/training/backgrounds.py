@@ -42,10 +42,12 @@ TREE_LINE_PROBABILITY = 0.6
 
 @dataclass(frozen=True)
 class Horizon:
-    """Image line of the horizon: v = v_center_px + slope * (u - W/2); below it is ground."""
+    """Image line of the horizon: v = v_center_px + slope * (u - W/2); below it is ground.
+    `focal_px` is the camera's focal length (0 where unknown)."""
 
     v_center_px: float
     slope: float
+    focal_px: float = 0.0
 
 
 class PhotoPool:
@@ -112,7 +114,7 @@ def fractal_noise(rng: np.random.Generator, h: int, w: int, base_cells: int = 3)
     return out / max(float(out.max()), 1e-6)
 
 
-def _ground_mask(h: int, w: int, horizon: Horizon, bumps: np.ndarray | None = None) -> np.ndarray:
+def below_horizon(h: int, w: int, horizon: Horizon, bumps: np.ndarray | None = None) -> np.ndarray:
     """(H, W) bool, True below the horizon line (optionally raised by per-column bumps, px)."""
     u = np.arange(w, dtype=np.float32)
     v_line = horizon.v_center_px + horizon.slope * (u - w / 2)
@@ -135,8 +137,15 @@ def _ridge(rng: np.random.Generator, w: int, height_px: float, roughness: int) -
     return (out / max(out.max(), 1e-9) * height_px).astype(np.float32)
 
 
-def sky(rng: np.random.Generator, h: int, w: int, horizon: Horizon) -> np.ndarray:
-    """Sky: vertical gradient (clear, overcast, hazy, sunset or dusk) with fractal clouds."""
+def sky(
+    rng: np.random.Generator,
+    h: int,
+    w: int,
+    horizon: Horizon,
+    perspective_cloud_probability: float = 0.0,
+) -> np.ndarray:
+    """Sky: vertical gradient (clear, overcast, hazy, sunset or dusk) with fractal clouds, which
+    with `perspective_cloud_probability` lie on a layer far above (`perspective_clouds`)."""
     kind = rng.choice(
         ["clear", "overcast", "hazy", "sunset", "dusk"], p=[0.4, 0.25, 0.15, 0.1, 0.1]
     )
@@ -154,13 +163,44 @@ def sky(rng: np.random.Generator, h: int, w: int, horizon: Horizon) -> np.ndarra
     t = np.clip(1.0 + v / max(h * rng.uniform(0.6, 1.5), 1), 0, 1)[..., None] ** 1.5
     img = np.broadcast_to(zenith_c * (1 - t) + horizon_c * t, (h, w, 3)).astype(np.float32)
     if rng.random() < 0.7:
-        cover = fractal_noise(rng, h, w, base_cells=int(rng.integers(2, 6)))
+        perspective = perspective_cloud_probability > 0 and horizon.focal_px > 0
+        if perspective and rng.random() < perspective_cloud_probability:
+            cover = perspective_clouds(rng, h, w, horizon)
+        else:
+            cover = fractal_noise(rng, h, w, base_cells=int(rng.integers(2, 6)))
         edge = rng.uniform(0.35, 0.7)
         alpha = np.clip((cover - edge) / rng.uniform(0.05, 0.3), 0, 1)[..., None]
         cloud_c = rng.uniform(0.6, 1.0) * np.array([1.0, 1.0, 1.0]) - rng.uniform(0, 0.15)
         shade = 1.0 - 0.35 * fractal_noise(rng, h, w, base_cells=4)[..., None]
         img = img * (1 - alpha) + (cloud_c * shade) * alpha
     return img.astype(np.float32)
+
+
+def perspective_clouds(rng: np.random.Generator, h: int, w: int, horizon: Horizon) -> np.ndarray:
+    """Cloud density (H, W) in [0, 1] of a layer far above, seen in perspective.
+
+    A ray `e` above the horizon meets a layer at height H after H / tan(e) ahead, so a pixel d
+    px above the horizon and a px along it sees the layer at (a / d, f / d) H (f the focal
+    length): clouds flatten into horizontal streaks with sharp lower edges towards the
+    horizon, as real ones do. Density fades into the horizon haze below a few degrees.
+    """
+    tile_px, ss = 256, 3  # the tile's detail stops at 4 texels; supersampled ss x ss
+    coarse = fractal_noise(rng, tile_px // 4, tile_px // 4, base_cells=int(rng.integers(2, 5)))
+    tile = cv2.resize(coarse, (tile_px, tile_px), interpolation=cv2.INTER_CUBIC)
+    cos_t = 1.0 / np.hypot(1.0, horizon.slope)
+    u = (np.arange(w * ss, dtype=np.float32)[None, :] + 0.5) / ss - w / 2
+    v = (np.arange(h * ss, dtype=np.float32)[:, None] + 0.5) / ss - horizon.v_center_px
+    above = (horizon.slope * u - v) * cos_t  # px above the horizon line
+    along = (u + horizon.slope * v) * cos_t
+    d = np.maximum(above, 0.5)
+    scale = tile_px * rng.uniform(0.1, 0.5)  # layer height over the tile's size
+    x = scale * along / d + rng.uniform(0, tile_px)
+    y = scale * horizon.focal_px / d + rng.uniform(0, tile_px)
+    # mirror the tile so that any coordinate samples it without a seam
+    x, y = (tile_px - 1 - np.abs(np.mod(c, 2 * tile_px - 2) - (tile_px - 1)) for c in (x, y))
+    density = cv2.remap(tile, x.astype(np.float32), y.astype(np.float32), cv2.INTER_LINEAR)
+    fade = np.clip(above / (horizon.focal_px * rng.uniform(0.03, 0.12)), 0, 1)
+    return cv2.resize(density * fade, (w, h), interpolation=cv2.INTER_AREA)
 
 
 def _palette_texture(
@@ -236,24 +276,25 @@ def landscape(
     horizon: Horizon,
     pool: PhotoPool | None,
     tree_line_probability: float = TREE_LINE_PROBABILITY,
+    perspective_cloud_probability: float = 0.0,
 ) -> np.ndarray:
     """Sky over hills, a tree line (with `tree_line_probability`) and textured ground, each
     layer with its own silhouette."""
-    img = sky(rng, h, w, horizon)
+    img = sky(rng, h, w, horizon, perspective_cloud_probability)
     for _ in range(int(rng.integers(0, 3))):
         hills = _ridge(rng, w, rng.uniform(5, h * 0.25), int(rng.integers(2, 8)))
         haze = rng.uniform(0.2, 0.7)
         colour = img[int(np.clip(horizon.v_center_px, 0, h - 1)), w // 2]
         layer = terrain(rng, h, w) * (1 - haze) + colour * haze
-        _fill_below(img, layer, _ground_mask(h, w, horizon, hills))
+        _fill_below(img, layer, below_horizon(h, w, horizon, hills))
     if rng.random() < tree_line_probability:
         trees = _ridge(rng, w, rng.uniform(3, h * 0.2), int(rng.integers(20, 80)))
         _fill_below(
-            img, vegetation(rng, h, w) * rng.uniform(0.5, 1.0), _ground_mask(h, w, horizon, trees)
+            img, vegetation(rng, h, w) * rng.uniform(0.5, 1.0), below_horizon(h, w, horizon, trees)
         )
     use_photo = pool is not None and len(pool) > 0 and rng.random() < 0.35
     ground = photo_crop(rng, pool, h, w) if use_photo else terrain(rng, h, w)
-    _fill_below(img, ground, _ground_mask(h, w, horizon))
+    _fill_below(img, ground, below_horizon(h, w, horizon))
     return img
 
 
@@ -338,13 +379,18 @@ def background(
     pool: PhotoPool | None = None,
     photo_probability: float = 0.3,
     tree_line_probability: float = TREE_LINE_PROBABILITY,
-) -> np.ndarray:
-    """A random background (H, W, 3) float32 in [0, 1]: a photograph (when the pool has any,
-    with photo_probability) or a procedural landscape, plus straight-edge distractors."""
-    if pool is not None and len(pool) > 0 and rng.random() < photo_probability:
-        img = photo_crop(rng, pool, h, w)
+    perspective_cloud_probability: float = 0.0,
+) -> tuple[np.ndarray, bool]:
+    """A random background (H, W, 3) float32 in [0, 1] and whether it is a photograph (when the
+    pool has any, with photo_probability) rather than a procedural landscape, whose ground lies
+    below the horizon; plus straight-edge distractors."""
+    photo = pool is not None and len(pool) > 0 and rng.random() < photo_probability
+    if photo:
+        img = photo_crop(rng, pool, h, w)  # type: ignore[arg-type]
     else:
-        img = landscape(rng, h, w, horizon, pool, tree_line_probability)
+        img = landscape(
+            rng, h, w, horizon, pool, tree_line_probability, perspective_cloud_probability
+        )
     img = np.ascontiguousarray(img, dtype=np.float32)
     add_distractors(rng, img, horizon)
-    return img
+    return img, photo

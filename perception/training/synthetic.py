@@ -44,6 +44,7 @@ from perception.training.backgrounds import (
     Horizon,
     PhotoPool,
     background,
+    below_horizon,
     draw_pole,
     fractal_noise,
 )
@@ -132,7 +133,8 @@ def horizon_of(camera: PosedCamera) -> Horizon:
     v_center = uv[0, 1] + slope * (camera.camera.width_px / 2 - uv[0, 0])
     if not np.isfinite(v_center) or not np.isfinite(slope):  # looking straight down
         return Horizon(v_center_px=-1e5, slope=0.0)
-    return Horizon(v_center_px=float(np.clip(v_center, -1e5, 1e5)), slope=float(slope))
+    v_center = float(np.clip(v_center, -1e5, 1e5))
+    return Horizon(v_center_px=v_center, slope=float(slope), focal_px=camera.camera.fy_px)
 
 
 def catenary_height_m(x_m: np.ndarray, a_m: float, x_low_m: float) -> np.ndarray:
@@ -625,11 +627,18 @@ def rendered_sample(
                 bundles.append(bundle)
     # a level wire's hard case is the tree line behind it: a landscape, always with trees
     photos, trees = (0.0, 1.0) if level else (p.photo_probability, TREE_LINE_PROBABILITY)
-    bg = background(rng, height_px, width_px, horizon_of(cam), pool, photos, trees)
+    horizon = horizon_of(cam)
+    clouds = p.perspective_cloud_probability
+    bg, photo = background(rng, height_px, width_px, horizon, pool, photos, trees, clouds)
     if aerial:
         bg, ground = ground_view(rng, bg, cam.camera, cam.world_from_camera, pool)
         if rng.random() < p.wire_shadow_probability:
             draw_shadows(bg, ground, bundles, cam, *sunlight(rng), p.supersampling)
+    elif (
+        not photo and p.ground_shadow_probability > 0 and rng.random() < p.ground_shadow_probability
+    ):
+        ground = below_horizon(height_px, width_px, horizon)
+        draw_shadows(bg, ground, bundles, cam, *sunlight(rng), p.supersampling)
     image, mask, coverage = composite_wires(rng, bg, bundles, cam, q)
     if p.sensor_effects_probability > 0 and rng.random() < p.sensor_effects_probability:
         image = sensor_effects(rng, image)
