@@ -452,6 +452,27 @@ def sunlight(rng: np.random.Generator) -> tuple[np.ndarray, float]:
     return sun, float(rng.uniform(0.3, 0.7))
 
 
+def unseen_poles(rng: np.random.Generator, cam: PosedCamera) -> WireBundle:
+    """One to three poles (3-15 m high) standing on the ground beside the view of a forward
+    camera, as a bundle without conductors: only their long shadows reach into the image,
+    thin dark lines on the ground that are not wires."""
+    n = int(rng.integers(1, 4))
+    half_fov = np.arctan(cam.camera.width_px / 2 / cam.camera.fx_px)
+    bearing = rng.uniform(half_fov + 0.05, 1.4, n) * rng.choice([-1.0, 1.0], n)
+    distance = rng.uniform(3.0, 40.0, n)
+    ahead = cam.ray_ned(cam.camera.cx_px, cam.camera.cy_px)
+    yaw = np.arctan2(ahead[1], ahead[0])
+    base = cam.position_ned_m[:2] + distance[:, None] * np.stack(
+        [np.cos(yaw + bearing), np.sin(yaw + bearing)], 1
+    )
+    height = rng.uniform(3.0, 15.0, n)
+    poles = tuple(
+        (np.array([b[0], b[1], -h]), np.array([b[0], b[1], 0.0]), float(d))
+        for b, h, d in zip(base, height, rng.uniform(0.08, 0.4, n), strict=True)
+    )
+    return WireBundle((), 0.0, 0.0, "dark", poles_ned_m=poles)
+
+
 def draw_shadows(
     img: np.ndarray,
     ground: np.ndarray,
@@ -638,7 +659,8 @@ def rendered_sample(
         not photo and p.ground_shadow_probability > 0 and rng.random() < p.ground_shadow_probability
     ):
         ground = below_horizon(height_px, width_px, horizon)
-        draw_shadows(bg, ground, bundles, cam, *sunlight(rng), p.supersampling)
+        casters = [*bundles, unseen_poles(rng, cam)]
+        draw_shadows(bg, ground, casters, cam, *sunlight(rng), p.supersampling)
     image, mask, coverage = composite_wires(rng, bg, bundles, cam, q)
     if p.sensor_effects_probability > 0 and rng.random() < p.sensor_effects_probability:
         image = sensor_effects(rng, image)
