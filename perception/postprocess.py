@@ -7,6 +7,8 @@ import numpy as np
 
 from perception.params import PerceptionParams
 
+_SURFACE_RUN_PX = 3  # surface pixels in a row that stop a continuation (not a stray return)
+
 
 def remove_small_components(binary: np.ndarray, min_px: int) -> np.ndarray:
     """(H, W) bool: `binary` without its 8-connected components of fewer than `min_px` pixels.
@@ -39,7 +41,11 @@ def wire_mask(
 
 
 def continued_wires(
-    mask: np.ndarray, min_length_px: float, max_angle_deg: float, factor: float
+    mask: np.ndarray,
+    min_length_px: float,
+    max_angle_deg: float,
+    factor: float,
+    surface: np.ndarray | None = None,
 ) -> np.ndarray:
     """(H, W) bool: `mask` plus the continuation of each of its straight wire components.
 
@@ -49,6 +55,12 @@ def continued_wires(
     `min_length_px` long along its principal axis, within `max_angle_deg` of the image rows, is
     drawn on along that axis past both ends for `factor` times its length (clipped at the
     image border), as thick as the component is on average. `factor` 0: `mask` unchanged.
+
+    `surface`: (H, W) bool, the pixels where stereo sees a surface (`stereo_surface`). A
+    continuation stops at the first `_SURFACE_RUN_PX` surface pixels in a row: the CNN misses
+    wires against the sky and the far tree line, while the long straight marks it makes on
+    surfaces (shadows of poles and wires on the ground, kerbs, roof edges) continued across
+    the ground would wall off the space in front of it.
     """
     mask = np.asarray(mask, dtype=bool)
     if factor <= 0 or not mask.any():
@@ -79,9 +91,39 @@ def continued_wires(
         reach = factor * length
         for end, sign in ((along.max(), 1.0), (along.min(), -1.0)):
             start = centre + end * axis
-            stop = start + sign * reach * axis
-            cv2.line(canvas, _px(start), _px(stop), 1, thickness, cv2.LINE_8)
+            step = sign * axis
+            free = reach if surface is None else _free_reach_px(surface, start, step, reach)
+            cv2.line(canvas, _px(start), _px(start + free * step), 1, thickness, cv2.LINE_8)
     return canvas.astype(bool)
+
+
+def stereo_surface(disparity_px: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(h, w) bool: the pixels of an image of `shape` (an integer down-scale of the
+    disparity image, as the colour image is) where most of the disparity pixels they cover
+    hold a return (> 0): a surface stereo sees, not the sky or a background beyond range
+    (0) nor a texture-less area (NaN)."""
+    h, w = shape
+    d = np.asarray(disparity_px)
+    ky, kx = d.shape[0] // h, d.shape[1] // w
+    if ky < 1 or kx < 1 or d.shape[0] != ky * h or d.shape[1] != kx * w:
+        raise ValueError(f"disparity {d.shape} is not an integer up-scale of {shape}")
+    returns = np.nan_to_num(d, nan=0.0) > 0
+    return returns.reshape(h, ky, w, kx).mean(axis=(1, 3)) >= 0.5
+
+
+def _free_reach_px(surface: np.ndarray, start: np.ndarray, step: np.ndarray, reach: float) -> float:
+    """How far from `start` along the unit `step` a continuation runs before the first
+    `_SURFACE_RUN_PX` pixels of `surface` in a row (at most `reach`), px."""
+    t = np.arange(1.0, max(reach, 0.0) + 1.0)
+    cols = np.rint(start[0] + t * step[0]).astype(int)
+    rows = np.rint(start[1] + t * step[1]).astype(int)
+    inside = (cols >= 0) & (cols < surface.shape[1]) & (rows >= 0) & (rows < surface.shape[0])
+    hit = np.zeros(t.shape, dtype=bool)
+    hit[inside] = surface[rows[inside], cols[inside]]
+    runs = np.convolve(hit, np.ones(_SURFACE_RUN_PX), mode="valid") >= _SURFACE_RUN_PX
+    if not runs.any():
+        return reach
+    return float(t[int(np.argmax(runs))] - 1.0)
 
 
 def _px(point: np.ndarray) -> tuple[int, int]:

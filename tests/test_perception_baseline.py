@@ -15,7 +15,12 @@ from perception.baseline import (
 )
 from perception.metrics import evaluate_predictions
 from perception.params import PerceptionParams
-from perception.postprocess import continued_wires, remove_small_components, wire_mask
+from perception.postprocess import (
+    continued_wires,
+    remove_small_components,
+    stereo_surface,
+    wire_mask,
+)
 
 
 def test_small_8_connected_components_are_removed():
@@ -63,6 +68,27 @@ def test_a_straight_wire_found_in_part_is_continued_past_both_ends():
     np.testing.assert_array_equal(continued_wires(mask, 30.0, 30.0, 0.0), mask)
     np.testing.assert_array_equal(continued_wires(mask, 30.0, 5.0, 1.0), mask)  # too steep
     np.testing.assert_array_equal(continued_wires(mask, 50.0, 30.0, 1.0), mask)  # too short
+
+
+def test_a_continuation_stops_where_stereo_sees_a_surface():
+    """The shadow of a pole on the ground, marked by the CNN, is not drawn on across the
+    ground; a wire against the sky is continued as before (to the border)."""
+    mask = np.zeros((60, 200), bool)
+    mask[10, 80:120] = True  # a wire against the sky
+    cv2.line(mask.view(np.uint8), (80, 40), (119, 50), 1, 1)  # a shadow on the ground, 14 deg
+    disparity = np.zeros((120, 400), np.float32)  # 2x the mask: sky, no return
+    disparity[60:] = 3.0  # the ground below row 30 of the mask: returns
+    disparity[60:62, ::7] = np.nan  # a few texture-less pixels do not make it sky
+    disparity[20, 300] = 3.0  # nor does a stray return make the sky a surface
+    surface = stereo_surface(disparity, mask.shape)
+    assert surface[30:].all() and not surface[:30].any()
+    gated = continued_wires(mask, 30.0, 30.0, 4.0, surface)
+    free = continued_wires(mask, 30.0, 30.0, 4.0)
+    assert gated[10].all() and free[10].all()  # the sky wire reaches both borders
+    shadow = gated[30:] & ~mask[30:]
+    assert shadow.sum() <= 3 and free[30:].sum() > mask[30:].sum() + 60
+    with pytest.raises(ValueError, match="integer up-scale"):
+        stereo_surface(disparity[:, :399], mask.shape)
 
 
 def test_rasterised_lines_give_one_score_level_per_thickness():

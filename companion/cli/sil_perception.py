@@ -2,15 +2,17 @@
 
 `evaluate` scores probability maps on labelled photographs; this scores what the flight
 process makes of what its cameras see in SIL: the shipped CNN's thresholded mask
-(`WireSegmenter.mask_of`) and that mask continued (`postprocess.continued_wires`), on colour
-frames the simulated cameras render of built-in scenarios, against the renderer's true wire
-pixels. Poses are drawn (seeded) over the first 60% of the way to the first goal, within
-2.5 m of the take-off altitude, 0.4 rad of the goal's bearing, pitched 0.15 rad down to 0.05 up.
+(`WireSegmenter.mask_of`) and that mask continued as the flight process continues it
+(`WireDetector.continued`, up to the surfaces stereo sees), on frames the simulated cameras
+render of built-in scenarios, against the renderer's true wire pixels. Poses are drawn
+(seeded) over the first 60% of the way to the first goal, within 2.5 m of the take-off
+altitude, 0.4 rad of the goal's bearing, pitched 0.15 rad down to 0.05 up.
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Annotated, Any
 
 import numpy as np
@@ -21,8 +23,11 @@ from companion.cli.perception import ModelOption, load_segmenter, resolve_checkp
 _SCENARIOS = ["ladder-wire", "stacked-wires", "power-line-corridor", "random"]
 
 
-def scenario_frames(settings: Any, scenario: str, seed: int, count: int) -> list[tuple[Any, Any]]:
-    """`count` (image_bgr, true wire mask) colour frames of `scenario` (seed) from drawn poses."""
+def scenario_frames(
+    settings: Any, scenario: str, seed: int, count: int
+) -> list[tuple[Any, Any, Any]]:
+    """`count` (image_bgr, disparity_px, true wire mask of the colour image) frames of
+    `scenario` (seed) from drawn poses."""
     from companion.cli.sim_camera import settings_camera
     from geometry.pose import Pose
     from hil.world.scenarios import build_scenario
@@ -38,8 +43,8 @@ def scenario_frames(settings: Any, scenario: str, seed: int, count: int) -> list
         bearing = np.arctan2(goal[1] - position[1], goal[0] - position[0])
         yaw, pitch, roll = bearing + rng.uniform(-0.4, 0.4), rng.uniform(-0.15, 0.05), 0.0
         pose = Pose.from_yaw_pitch_roll(yaw, pitch, roll, position)
-        colour = camera.render_colour(float(k), pose)
-        frames.append((colour.image_bgr, colour.wire_mask))
+        frame = camera.render(float(k), pose)
+        frames.append((frame.image_bgr, frame.disparity_px, frame.image_wire_mask))
     return frames
 
 
@@ -59,29 +64,25 @@ def evaluate_sim(
     than 50 such pixels; each for the mask and the continued mask (`*_continued`).
     """
     from companion.cli.settings import load_sim_settings
+    from companion.flight.perceive import WireDetector
     from hil.world.scenarios import SCENARIOS
     from perception.metrics import MaskScore
-    from perception.postprocess import continued_wires
 
     names = scenarios or _SCENARIOS
     if unknown := [n for n in names if n not in SCENARIOS]:
         raise typer.BadParameter(f"unknown scenario {unknown[0]!r}; one of {', '.join(SCENARIOS)}")
     settings = load_sim_settings()
-    p = settings.perception
-    segmenter = load_segmenter(str(resolve_checkpoint(model)), "auto")
+    segmenter = replace(
+        load_segmenter(str(resolve_checkpoint(model)), "auto"), params=settings.perception
+    )
+    detector = WireDetector(segmenter)
     plain, continued = MaskScore(), MaskScore()
     for scenario in names:
         for seed in range(seeds):
-            for image, truth in scenario_frames(settings, scenario, seed, frames):
+            for image, disparity, truth in scenario_frames(settings, scenario, seed, frames):
                 mask = segmenter.mask_of(segmenter.probability(image, "bgr"))
                 plain += MaskScore.of(mask, truth)
-                longer = continued_wires(
-                    mask,
-                    p.wire_continuation_min_length_px,
-                    p.wire_continuation_max_angle_deg,
-                    p.wire_continuation_factor,
-                )
-                continued += MaskScore.of(longer, truth)
+                continued += MaskScore.of(detector.continued(mask, disparity), truth)
     result = {"scenarios": names, "seeds": seeds, "frames": plain.frames}
     result.update(plain.summary())
     result.update({f"{k}_continued": v for k, v in continued.summary().items()})

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.ingest.frames import CameraFrame
-from perception.postprocess import continued_wires
+from perception.postprocess import continued_wires, stereo_surface
 from perception.segmenter import WireSegmenter
 
 
@@ -41,14 +41,23 @@ class WireDetector:
         if frame.image_bgr is None:
             return Perception(frame.stamp_s, frame.sequence, None, frame.disparity_px)
         prob = self._segmenter.probability(frame.image_bgr, "bgr")
-        params = self._segmenter.params
         mask = self._segmenter.mask_of(prob)
         possible = self._segmenter.possible_of(prob, mask)
-        mask = continued_wires(
+        mask = self.continued(mask, frame.disparity_px)
+        possible = possible | mask
+        return Perception(frame.stamp_s, frame.sequence, mask, frame.disparity_px, possible)
+
+    def continued(self, mask: np.ndarray, disparity_px: np.ndarray | None) -> np.ndarray:
+        """The thresholded `mask` with its straight wires continued (`continued_wires`), up to
+        the surfaces stereo sees in `disparity_px` (the same exposure's, or None)."""
+        params = self._segmenter.params
+        surface = None
+        if params.wire_continuation_stops_at_surfaces and disparity_px is not None:
+            surface = stereo_surface(disparity_px, mask.shape)
+        return continued_wires(
             mask,
             params.wire_continuation_min_length_px,
             params.wire_continuation_max_angle_deg,
             params.wire_continuation_factor,
+            surface,
         )
-        possible = possible | mask
-        return Perception(frame.stamp_s, frame.sequence, mask, frame.disparity_px, possible)
