@@ -115,6 +115,8 @@ def _free_reach_px(surface: np.ndarray, start: np.ndarray, step: np.ndarray, rea
     """How far from `start` along the unit `step` a continuation runs before the first
     `_SURFACE_RUN_PX` pixels of `surface` in a row (at most `reach`), px."""
     t = np.arange(1.0, max(reach, 0.0) + 1.0)
+    if t.size < _SURFACE_RUN_PX:
+        return reach  # too short to cross a run of surface
     cols = np.rint(start[0] + t * step[0]).astype(int)
     rows = np.rint(start[1] + t * step[1]).astype(int)
     inside = (cols >= 0) & (cols < surface.shape[1]) & (rows >= 0) & (rows < surface.shape[0])

@@ -2,8 +2,10 @@
 
 `evaluate` scores probability maps on labelled photographs; this scores what the flight
 process makes of what its cameras see in SIL: the shipped CNN's thresholded mask
-(`WireSegmenter.mask_of`) and that mask continued as the flight process continues it
-(`WireDetector.continued`, up to the surfaces stereo sees), on frames the simulated cameras
+(`WireSegmenter.mask_of`, with the settings' `perception`) and that mask continued as the
+flight process continues it (`WireDetector.continued`: with
+`perception.wire_continuation_stops_at_surfaces`, up to the surfaces the same frame's
+stereo sees), on frames the simulated cameras
 render of built-in scenarios, against the renderer's true wire pixels. Poses are drawn
 (seeded) over the first 60% of the way to the first goal, within 2.5 m of the take-off
 altitude, 0.4 rad of the goal's bearing, pitched 0.15 rad down to 0.05 up.
