@@ -199,9 +199,10 @@ class PlanningParams(BaseModel):
         3.0,
         ge=0,
         le=50,
-        description="within this of the goal, a straight segment to it, free and seen up to "
-        "arrival_tolerance_m from it, is flown instead of the library (beyond 4.5: the library "
-        "cannot settle on a goal, nor reach one just above or below the camera's view), m",
+        description="within this horizontal distance of the goal (at any height above or "
+        "below it), a straight segment to it, free and seen up to arrival_tolerance_m from it, "
+        "is flown instead of the library (beyond 4.5: the library cannot settle on a goal, nor "
+        "reach one above or below the camera's view), m",
     )
     approach_speed_mps: float = Field(
         1.0, gt=0, le=10, description="speed of the final straight approach to the goal, m/s"

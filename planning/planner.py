@@ -166,15 +166,15 @@ class LocalPlanner:
         ):
             self._anchor = None  # flown away on seen ground: the volume moves with it again
         own_center = position if self._anchor is None else self._anchor
-        if distance <= p.approach_distance_m and self._approach_is_free(
-            position, own_center, occupancy_map
+        to_goal = self._goal - position
+        if float(np.hypot(to_goal[0], to_goal[1])) <= p.approach_distance_m and (
+            self._approach_is_free(position, own_center, occupancy_map)
         ):
             return self._approach(now_s, vehicle, position, distance, commanded_velocity_ned_mps)
 
         speed, stopped, heading, positions, velocities = self._placed_library(
             vehicle, commanded_velocity_ned_mps
         )
-        to_goal = self._goal - position
         bearing = float(np.arctan2(to_goal[1], to_goal[0]))
         # a goal more below or above than ahead: its bearing is noise (the vehicle circled over
         # one, turning to each new bearing), and no turn brings it into the forward camera
@@ -280,7 +280,9 @@ class LocalPlanner:
         around `own_center` (beyond the thesis: the library flies forward and cannot settle on
         a nearby goal), up to the arrival sphere: inside `arrival_tolerance_m` the vehicle has
         arrived and holds on the goal. A goal just above or below, where the forward camera
-        cannot look, is reached so rather than circled until the planner gives up."""
+        cannot look, is reached so rather than circled until the planner gives up; so is one
+        metres straight above or below (`approach_distance_m` is measured horizontally), which
+        every trajectory of the library, flying forward, overshoots."""
         assert self._goal is not None
         p = self._params
         length = float(np.linalg.norm(self._goal - position))
@@ -298,17 +300,19 @@ class LocalPlanner:
         self, position: np.ndarray, commanded_velocity_ned_mps: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(times (P,), positions (P, 3), velocities (P, 3)) along the segment to the goal:
-        from the commanded speed along it, towards `approach_speed_mps` within
-        `max_accel_mps2`, slowing so that the tracker's stopping cap is never exceeded."""
+        from the commanded speed along it, towards `approach_speed_mps` (its vertical part
+        within `max_vertical_speed_mps`) within `max_accel_mps2`, slowing so that the tracker's
+        stopping cap is never exceeded."""
         assert self._goal is not None
         p = self._params
         length = float(np.linalg.norm(self._goal - position))
         direction = (self._goal - position) / max(length, 1e-9)
+        cruise = min(p.approach_speed_mps, p.max_vertical_speed_mps / max(abs(direction[2]), 1e-9))
         speed = max(float(commanded_velocity_ned_mps @ direction), 0.0)
         dt, a = _APPROACH_DT_S, p.max_accel_mps2
         arcs, speeds = [0.0], [speed]
         while arcs[-1] < length and len(arcs) < _APPROACH_MAX_SAMPLES:
-            target = min(p.approach_speed_mps, np.sqrt(a * (length - arcs[-1])))
+            target = min(cruise, np.sqrt(a * (length - arcs[-1])))
             speed = max(speed + float(np.clip(target - speed, -a * dt, a * dt)), _CREEP_MPS)
             arcs.append(min(length, arcs[-1] + speed * dt))
             speeds.append(speed)
