@@ -329,8 +329,15 @@ class LocalPlanner:
         distance: float,
         commanded: np.ndarray,
     ) -> PlannerOutput:
-        """Fly the free straight segment to the goal at `approach_speed_mps` and hold there."""
-        approaching = self._reference is not None and self._reference.plan_id == self._approach_id
+        """Fly the free straight segment to the goal at `approach_speed_mps` and hold there.
+        A segment longer than one reference holds (`_APPROACH_MAX_SAMPLES`: a climb of tens of
+        metres) is flown in legs, the next planned when the last one ends."""
+        ref = self._reference
+        approaching = (
+            ref is not None
+            and ref.plan_id == self._approach_id
+            and (vehicle.stamp_s < ref.end_s or np.allclose(ref.positions_ned_m[-1], self._goal))
+        )
         if self._state is not PlannerState.TRACKING or not approaching:
             times, positions, velocities = self._approach_profile(position, commanded)
             self._plan_id += 1
