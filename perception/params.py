@@ -57,7 +57,8 @@ class PerceptionParams(BaseModel):
         "pixels of a colour pixel hold a return, 3 such pixels in a row), so wires are "
         "continued across the sky and the far background, where the CNN misses them, not "
         "across the ground, where its straight false marks (shadows of poles and wires) lie. "
-        "Measured 2026-12-06 (README): on 432 SIL frames the continued mask's wire recall 0.545 "
+        "Measured 2026-12-06 (docs/closed-loop-log.md): on 432 SIL frames the continued "
+        "mask's wire recall 0.545 "
         "and false share 0.34 against 0.583 and 0.50 without it (0.483 and 0.27 not continued); "
         "sweep seeds 0-5 27 of 36 and 1 strike (random seed 5 at 0.30 m; a reflight passed at "
         "0.58 m)",
