@@ -65,6 +65,15 @@ class SimParams(BaseModel):
     timeout_s: float = Field(
         120.0, gt=0.0, le=36000.0, description="a flight not done after this fails, simulated s"
     )
+    wire_masks: Literal["cnn", "truth", "cnn_misses", "cnn_false_marks"] = Field(
+        "cnn",
+        description="the wire masks the flight's map gets, to measure how far perception "
+        "limits the loop: cnn, the shipped CNN's (the product); truth, the renderer's true wire "
+        "pixels (perfect detection in the image, still no depth; the CNN does not run, so its "
+        "compute is not charged); cnn_misses, the CNN's mask without its marks farther than "
+        "`sim_masks.NEAR_WIRE_PX` from a true wire (its misses, none of its false marks); "
+        "cnn_false_marks, the true wires plus those marks (its false marks, none of its misses)",
+    )
     px4_ground_truth: bool = Field(
         True,
         description="with --connect to PX4 SITL: the cameras render from, and the judge samples, "

@@ -126,6 +126,7 @@ def fly_and_judge(spec: FlightSpec, png: Path | None = None, progress: bool = Fa
         "time": "realtime" if (spec.realtime or spec.connect_url) else settings.sim.time,
         "truth": truth,
         "cameras_from": record.truth_source,  # the pose the cameras rendered from
+        "wire_masks": settings.sim.wire_masks,
         "wall_s": round(record.wall_s, 1),
         "compute_s": _finite(record.compute_s),
         "frames": record.report.frames,

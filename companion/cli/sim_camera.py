@@ -39,11 +39,16 @@ def settings_camera(settings: SimSettings, world: World) -> SimulatedStereoCamer
     )
 
 
+_TRUTH_MASKS_KEPT = 32  # frames in flight between the camera and the detector, and more
+
+
 class SimulatedCameraSource:
     """`CameraSource` rendering `SimulatedStereoCamera` frames at the camera rate.
 
     pose_at_exposure: the vehicle's `world_from_body` in the *world* frame, now (None when
         unknown: the frame is skipped).
+    truth_masks: exposure stamp (s) -> `(h, w) bool` true wire pixels of the colour image, of
+        the newest frames (`companion.cli.sim_masks` reads them).
     """
 
     def __init__(
@@ -62,6 +67,7 @@ class SimulatedCameraSource:
         self._next_s: float | None = None
         self._sequence = 0
         self.failed = False  # fault injection: next_frame raises CameraError
+        self.truth_masks: dict[float, np.ndarray] = {}
 
     async def open(self) -> None:
         """Start exposing at the next frame period."""
@@ -98,4 +104,7 @@ class SimulatedCameraSource:
 
     def _render_now(self, stamp_s: float, world_from_body: Pose) -> tuple[np.ndarray, np.ndarray]:
         frame = self._camera.render(stamp_s, world_from_body)
+        self.truth_masks[stamp_s] = frame.image_wire_mask
+        while len(self.truth_masks) > _TRUTH_MASKS_KEPT:
+            del self.truth_masks[next(iter(self.truth_masks))]
         return frame.disparity_px, frame.image_bgr

@@ -29,7 +29,9 @@ import numpy as np
 from companion.cli.settings import SimSettings
 from companion.cli.sim_addons import FlightAddon
 from companion.cli.sim_camera import SimulatedCameraSource, settings_camera
+from companion.cli.sim_masks import TruthWireDetector
 from companion.clock import Clock, WallClock, wait_or_timeout
+from companion.flight.perceive import WireDetector
 from companion.flight.process import FlightProcess, FlightReport
 from companion.flight.vehicle_check import check_vehicle
 from companion.link.vehicle_link import LinkError, LinkEvent, VehicleLink
@@ -141,9 +143,14 @@ async def fly_world(
         settings.camera.frame_rate_hz,
         sim.camera_latency_s,
     )
+    detector = (
+        None
+        if sim.wire_masks == "cnn"
+        else TruthWireDetector(WireDetector(segmenter), camera, sim.wire_masks)
+    )
     for addon in addons:
         camera = addon.camera(camera, clock)
-    process = FlightProcess(settings, link, camera, clock, segmenter)
+    process = FlightProcess(settings, link, camera, clock, segmenter, detector)
     stop = asyncio.Event()  # an addon may end the flight early
     truth.ground_allowed = lambda: process.mission.state not in AIRBORNE
     driver = asyncio.create_task(clock.run(), name="lockstep") if lockstep else None

@@ -103,7 +103,8 @@ class FlightProcess:
     """The closed loop on a connected `VehicleLink` and a `CameraSource`.
 
     Construct with the parts (the wire segmenter is loaded from `settings.perception` when
-    not given), then `await run()`. A simulator plugs in its own camera source and clock;
+    not given; a `detector` replaces the CNN stage's, as a simulator's diagnostics do), then
+    `await run()`. A simulator plugs in its own camera source and clock;
     the process cannot tell.
     """
 
@@ -114,6 +115,7 @@ class FlightProcess:
         camera: CameraSource,
         clock: Clock,
         segmenter: WireSegmenter | None = None,
+        detector: Callable[[CameraFrame], Perception] | None = None,
     ) -> None:
         self.settings = settings
         self.link = link
@@ -122,8 +124,9 @@ class FlightProcess:
         self.bus = Bus(clock.now_s)
         self.times = StageTimes(settings.flight.timing_window)
         self.mission = Mission(settings.mission)
-        seg = segmenter or WireSegmenter.load(params=settings.perception)
-        self.detector = WireDetector(seg)
+        self.detector = detector or WireDetector(
+            segmenter or WireSegmenter.load(params=settings.perception)
+        )
         self.builder = MapBuilder(settings.mapping, settings.catenary)
         self.pilot = Pilot(settings.planning)
         self._rebuilt_s = -math.inf  # when the map was last rebuilt after a pose jump
