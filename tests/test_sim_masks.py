@@ -79,5 +79,6 @@ def test_a_frame_without_truth_is_an_error_not_a_guess(exposed) -> None:
     stray = CameraFrame(frame.stamp_s + 1.0, frame.sequence + 1, frame.image_bgr, None)
     with pytest.raises(LookupError, match="no true wire mask"):
         TruthWireDetector(cnn, source, "cnn_misses")(stray)
-    with pytest.raises(ValueError, match=r"unknown sim\.wire_masks"):
-        TruthWireDetector(cnn, source, "oracle")
+    for mode in ("oracle", "cnn"):  # the product's own mode needs no truth detector
+        with pytest.raises(ValueError, match=r"not a truth-mask mode of sim\.wire_masks"):
+            TruthWireDetector(cnn, source, mode)

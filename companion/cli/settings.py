@@ -17,6 +17,9 @@ from companion.config import Settings, load_settings
 from hil.sensors.params import CameraSimParams
 from hil.vehicle.params import VehicleSimParams
 
+WireMasks = Literal["cnn", "truth", "cnn_misses", "cnn_false_marks"]
+"""`sim.wire_masks`: the wire masks a simulated flight's map gets (`companion.cli.sim_masks`)."""
+
 
 class SimParams(BaseModel):
     """A simulated flight (`wireavoid sim`, `sweep`): time, cameras, the judge's limits."""
@@ -65,7 +68,7 @@ class SimParams(BaseModel):
     timeout_s: float = Field(
         120.0, gt=0.0, le=36000.0, description="a flight not done after this fails, simulated s"
     )
-    wire_masks: Literal["cnn", "truth", "cnn_misses", "cnn_false_marks"] = Field(
+    wire_masks: WireMasks = Field(
         "cnn",
         description="the wire masks the flight's map gets, to measure how far perception "
         "limits the loop: cnn, the shipped CNN's (the product); truth, the renderer's true wire "

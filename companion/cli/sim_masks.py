@@ -10,9 +10,12 @@ given and cannot tell; only the `sim` command composes one of these.
 
 from __future__ import annotations
 
+from typing import get_args
+
 import cv2
 import numpy as np
 
+from companion.cli.settings import WireMasks
 from companion.cli.sim_camera import SimulatedCameraSource
 from companion.flight.perceive import Perception, WireDetector
 from companion.ingest.frames import CameraFrame
@@ -20,14 +23,15 @@ from companion.ingest.frames import CameraFrame
 NEAR_WIRE_PX = 7
 """A CNN mark within this many colour pixels (square window) of a true wire is on the wire:
 the CNN's masks are a few pixels thick around a thin wire."""
+_NEAR_WIRE_WINDOW = np.ones((2 * NEAR_WIRE_PX + 1,) * 2, np.uint8)
 
 
 class TruthWireDetector:
     """A `WireDetector` stand-in mixing the CNN's mask with the camera's truth (`mode`)."""
 
-    def __init__(self, cnn: WireDetector, camera: SimulatedCameraSource, mode: str) -> None:
-        if mode not in ("truth", "cnn_misses", "cnn_false_marks"):
-            raise ValueError(f"unknown sim.wire_masks {mode!r}")
+    def __init__(self, cnn: WireDetector, camera: SimulatedCameraSource, mode: WireMasks) -> None:
+        if mode not in get_args(WireMasks) or mode == "cnn":
+            raise ValueError(f"not a truth-mask mode of sim.wire_masks: {mode!r}")
         self._cnn = cnn
         self._camera = camera
         self.mode = mode
@@ -41,8 +45,7 @@ class TruthWireDetector:
             return Perception(frame.stamp_s, frame.sequence, truth, frame.disparity_px, truth)
         cnn = self._cnn(frame)
         assert cnn.wire_mask is not None and cnn.possible_mask is not None
-        window = np.ones((2 * NEAR_WIRE_PX + 1,) * 2, np.uint8)
-        on_wire = cv2.dilate(truth.astype(np.uint8), window) > 0
+        on_wire = cv2.dilate(truth.astype(np.uint8), _NEAR_WIRE_WINDOW) > 0
         if self.mode == "cnn_misses":
             mask, possible = cnn.wire_mask & on_wire, cnn.possible_mask & on_wire
         else:
