@@ -26,7 +26,7 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 
 # The main job: the whole stack flies the thesis' wire between two ladders (4.6.2) in simulation
-# (seed 0 is a known safe failure: README, "The two commands").
+# (seed 0 is a known safe failure: docs/closed-loop-log.md).
 sim: $(STAMP)
 	$(BIN)/wireavoid sim --scenario ladder-wire --seed 1
 
