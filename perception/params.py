@@ -323,6 +323,14 @@ class TrainingParams(BaseModel):
         default_factory=lambda: ["skimage"],
         description="real-photo backgrounds: 'skimage' and/or folders (2.3.2)",
     )
+    frame_folders: list[str] = Field(
+        default_factory=list,
+        description="labelled image folders mixed into the synthetic batches (`wireavoid "
+        "sil-frames` writes frames the simulated cameras render); never evaluation photographs",
+    )
+    frames_share: float = Field(
+        0.0, ge=0, le=1, description="share of the training items cropped from frame_folders"
+    )
     eval_count: int = Field(64, ge=0, description="held-out synthetic images evaluated at the end")
     eval_height_px: int = Field(240, ge=16, description="held-out image height, px")
     eval_width_px: int = Field(320, ge=16, description="held-out image width, px")

@@ -11,10 +11,10 @@ from test_perception_segmenter import dark_line_image, darkness_model
 from typer.testing import CliRunner
 
 from companion.cli import app
-from companion.cli.perception import image_mask_pairs
-from perception.checkpoint import save_checkpoint
+from perception.checkpoint import read_checkpoint, save_checkpoint
 from perception.params import FAST_MODEL
 from perception.segmenter import WireSegmenter
+from perception.training.labelled import image_mask_pairs
 
 runner = CliRunner(env={"COLUMNS": "400"})  # error panels unwrapped, for matching
 
@@ -215,3 +215,29 @@ def test_evaluate_sim_scores_the_shipped_mask_on_rendered_frames():
     assert scores["frames_with_false_marks"] <= scores["frames_with_false_marks_continued"] <= 3
     bad = runner.invoke(app, ["evaluate-sim", "--scenario", "nowhere"])
     assert bad.exit_code == 2 and "unknown scenario 'nowhere'" in bad.output
+
+
+def test_sil_frames_writes_a_labelled_folder_that_train_mixes_in(tmp_path):
+    """`sil-frames` renders frames with their true wire pixels; `train --frames` reads them."""
+    out = tmp_path / "sil"
+    args = ["sil-frames", "--out", str(out), "--scenario", "ladder-wire", "--first-seed", "0"]
+    result = runner.invoke(app, [*args, "--seeds", "1", "--frames", "5"])
+    assert result.exit_code == 0, result.output
+    record = json.loads((out / "sil_frames.json").read_text())
+    assert record["frames"] == 5 and record["scenarios"] == ["ladder-wire"]
+    pairs, unmatched = image_mask_pairs(out)
+    assert len(pairs) == 5 and not unmatched
+    masks = [cv2.imread(str(m), cv2.IMREAD_GRAYSCALE) for _, m in pairs]
+    assert all(set(np.unique(m)) <= {0, 255} for m in masks)
+    assert sum(int((m > 0).sum()) for m in masks) > 100  # the ladder wire, in 2 of the 5 views
+    assert record["wire_pixel_share"] > 0
+    trained = tmp_path / "m.pt"
+    train = ["train", "--model", "k8-d2-k2", "--steps", "1", "--batch", "2", "--crop", "32x40"]
+    train += ["--workers", "0", "--eval-count", "0", "--no-bf16", "--photo-probability", "0"]
+    train += ["--frames", str(out), "--frames-share", "0.5", "--out", str(trained)]
+    result = runner.invoke(app, train)
+    assert result.exit_code == 0, result.output
+    params = read_checkpoint(trained)["training"]["params"]
+    assert params["frame_folders"] == [str(out)] and params["frames_share"] == 0.5
+    bad = runner.invoke(app, ["sil-frames", "--out", str(out), "--scenario", "nowhere"])
+    assert bad.exit_code == 2 and "unknown scenario" in bad.output

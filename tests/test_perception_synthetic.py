@@ -158,6 +158,34 @@ def test_dataset_items_and_rgble_channels():
     assert y.dtype.is_floating_point is False and set(y.unique().tolist()) <= {0, 1}
 
 
+def test_a_share_of_the_items_are_crops_of_labelled_frames(tmp_path):
+    """`frames_share` of the items come from the frame folders, cropped (and mirrored) with
+    their masks; the rest are the synthetic images they would have been."""
+    frame = np.full((30, 40, 3), 200, np.uint8)
+    frame[12, :, :] = 10  # a dark wire along row 12, labelled
+    mask = np.zeros((30, 40), np.uint8)
+    mask[12] = 255
+    (tmp_path / "f").mkdir()
+    cv2.imwrite(str(tmp_path / "f" / "a.png"), frame)
+    cv2.imwrite(str(tmp_path / "f" / "a_mask.png"), mask)
+    mixed = SyntheticWireDataset(5, 200, 48, 64, frame_folders=(str(tmp_path / "f"),))
+    mixed.frames_share = 0.5
+    sources = []
+    for i in range(200):
+        image, label = mixed.sample(i)
+        from_frame = bool((image == 200).mean() > 0.9)  # resized up: 48/30 = 1.6 times
+        sources.append(from_frame)
+        if from_frame:
+            rows = np.nonzero(label.any(axis=1))[0]
+            assert label.dtype == np.uint8 and 1 <= len(rows) <= 3  # the wire, resized
+            assert (image[rows, :, 0] < 120).mean() > 0.5  # where the label says
+        else:
+            np.testing.assert_array_equal(image, synthetic_sample(5, i, 48, 64)[0])
+    assert 0.35 < np.mean(sources) < 0.65
+    with pytest.raises(ValueError, match="no image/mask pairs"):
+        SyntheticWireDataset(0, 1, 8, 8, frame_folders=(str(tmp_path),), frames_share=1.0).sample(0)
+
+
 def test_write_dataset_round_trip(tmp_path):
     out = write_dataset(tmp_path / "ds", 3, 9, 40, 56)
     image, mask = synthetic_sample(9, 2, 40, 56)

@@ -1,13 +1,7 @@
 """`wireavoid` commands of the perception domain: detect, evaluate, bench perception.
 
-Datasets for `evaluate` are folders of images with PNG wire masks (nonzero = wire), in
-either layout:
-
-- `DIR/images/NAME.EXT` with `DIR/masks/NAME.png` (also `NAME_mask.png` there), or
-- `DIR/NAME.EXT` with `DIR/NAME_mask.png` side by side,
-
-where EXT is one of jpg, jpeg, png, bmp, tif, tiff, webp. Images without a mask are
-reported and skipped.
+Datasets for `evaluate` are folders of images with PNG wire masks, in the layouts of
+`perception.training.labelled`.
 """
 
 from __future__ import annotations
@@ -21,10 +15,6 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
-OUTPUT_TAGS = ("_mask", "_prob", "_overlay")
-"""Stem endings of masks and of `detect`'s own outputs: never treated as input images."""
-
 ModelOption = Annotated[
     str | None,
     typer.Option(
@@ -36,39 +26,6 @@ ModelOption = Annotated[
 RuntimeOption = Annotated[
     str, typer.Option("--runtime", help="auto | torch | torch-bf16 | onnx | onnx-int8 | tensorrt")
 ]
-
-
-def image_files(path: Path) -> list[Path]:
-    """Input images: `path` itself, or the images directly in the folder `path`, sorted.
-
-    Files whose stem ends in _mask, _prob or _overlay are left out.
-    """
-    if path.is_file():
-        return [path]
-    if not path.is_dir():
-        raise FileNotFoundError(f"{path} is neither an image file nor a folder")
-    return sorted(
-        p
-        for p in path.iterdir()
-        if p.suffix.lower() in IMAGE_SUFFIXES and not p.stem.endswith(OUTPUT_TAGS)
-    )
-
-
-def image_mask_pairs(folder: Path) -> tuple[list[tuple[Path, Path]], list[Path]]:
-    """((image, mask) pairs, images without a mask) of a dataset folder (module doc layouts)."""
-    if (folder / "images").is_dir():
-        image_dir, mask_dirs = folder / "images", [folder / "masks", folder / "images"]
-    else:
-        image_dir, mask_dirs = folder, [folder]
-    pairs, unmatched = [], []
-    for image in image_files(image_dir):
-        candidates = [d / f"{image.stem}{tag}.png" for d in mask_dirs for tag in ("", "_mask")]
-        mask = next((c for c in candidates if c.is_file() and c != image), None)
-        if mask is None:
-            unmatched.append(image)
-        else:
-            pairs.append((image, mask))
-    return pairs, unmatched
 
 
 def resolve_checkpoint(model: str | None) -> Path:
@@ -95,26 +52,6 @@ def load_segmenter(model: str | None, runtime: str) -> Any:
         return WireSegmenter.load(resolve_checkpoint(model), runtime=runtime)  # type: ignore[arg-type]
     except (ValueError, RuntimeError) as err:
         raise typer.BadParameter(str(err)) from err
-
-
-def read_image(path: Path) -> np.ndarray:
-    """(H, W, 3) uint8 BGR image; ValueError naming the file when it cannot be decoded."""
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise ValueError(f"cannot read image {path}")
-    return image
-
-
-def read_mask(path: Path) -> np.ndarray:
-    """(H, W) bool wire mask of a PNG (any nonzero value is wire)."""
-    import cv2
-
-    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if mask is None:
-        raise ValueError(f"cannot read mask {path}")
-    return (mask if mask.ndim == 2 else mask.max(axis=2)) > 0
 
 
 def overlay(image_bgr: np.ndarray, prob: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -148,6 +85,8 @@ def detect(
     runtime: RuntimeOption = "auto",
 ) -> None:
     """Wire probability map, post-processed mask (4.4.1) and overlay for each input image."""
+    from perception.training.labelled import IMAGE_SUFFIXES, image_files, read_image
+
     try:
         images = image_files(source)
     except FileNotFoundError as err:
@@ -261,6 +200,7 @@ def dataset_metrics(
     from tqdm import tqdm
 
     from perception.metrics import image_counts, metrics_from_counts, validated_thresholds
+    from perception.training.labelled import read_image, read_mask
 
     thresholds = validated_thresholds()
     counts: dict[str, list] = {k: [] for k in scorers}
@@ -292,6 +232,7 @@ def calibrate_threshold(
     perception.mask_threshold_from_weights is false). Never calibrate on an evaluation set.
     """
     from perception.checkpoint import record_mask_threshold
+    from perception.training.labelled import image_mask_pairs
 
     pairs = []
     for folder in folders:
@@ -356,6 +297,7 @@ def evaluate(
     """
     from perception.baseline import candamo_scores, lsd_scores
     from perception.segmenter import as_rgb
+    from perception.training.labelled import image_mask_pairs
 
     if not folder.is_dir():
         raise typer.BadParameter(f"{folder} is not a folder")

@@ -165,6 +165,17 @@ def train(
         _TRAINING.workers
     ),
     photos: PhotosOption = None,
+    frames: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--frames",
+            help="labelled image folder mixed into the batches (repeatable; `wireavoid "
+            "sil-frames` writes one)",
+        ),
+    ] = None,
+    frames_share: Annotated[
+        float, typer.Option(min=0, max=1, help="share of the items cropped from --frames")
+    ] = _TRAINING.frames_share,
     photo_probability: Annotated[
         float, typer.Option(min=0, max=1, help="share of backgrounds that are real photos")
     ] = _SYNTHETIC.photo_probability,
@@ -239,6 +250,8 @@ def train(
         seed=seed,
         workers=workers,
         photo_sources=list(_photos(photos)),
+        frame_folders=[str(f) for f in frames or []],
+        frames_share=frames_share,
         checkpoint_every=checkpoint_every,
         eval_count=eval_count,
         bf16=bf16,

@@ -198,6 +198,8 @@ def train(
         params.input_mode,
         synthetic,
         tuple(params.photo_sources),
+        tuple(params.frame_folders),
+        params.frames_share,
     )
     indices = [
         i for s in range(start, params.steps) for i in step_indices(s, rank, world, params.batch)

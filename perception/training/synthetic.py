@@ -48,6 +48,7 @@ from perception.training.backgrounds import (
     draw_pole,
     fractal_noise,
 )
+from perception.training.labelled import LabelledFrames
 from perception.training.labels import label_mask, rasterise
 
 _NEAR_M = 0.3  # near clipping depth of the camera, m
@@ -55,6 +56,7 @@ _POINTS_PER_SPAN = 240
 _UP_NED = np.array([0.0, 0.0, -1.0])
 _HORIZON_WIRE_MAX_M = 60.0  # farthest level wire on the horizon: beyond it, it is sub-pixel
 MATERIALS = ("dark", "metal", "oxidised", "bright", "rust")
+_FRAMES_STREAM = 2  # the random stream that picks an item's source and its crop
 
 
 @dataclass(frozen=True)
@@ -668,7 +670,13 @@ def rendered_sample(
 
 
 class SyntheticWireDataset(torch.utils.data.Dataset):
-    """On-the-fly training data: item i = (network input (C, H, W) float32, mask (H, W) int64)."""
+    """On-the-fly training data: item i = (network input (C, H, W) float32, mask (H, W) int64).
+
+    With `frame_folders` (labelled image folders, `labelled`), a share `frames_share` of the
+    items, drawn from (seed, index), is a crop of one of their frames instead of a synthetic
+    image: frames the simulated cameras render (`wireavoid sil-frames`), never evaluation
+    photographs.
+    """
 
     def __init__(
         self,
@@ -679,13 +687,17 @@ class SyntheticWireDataset(torch.utils.data.Dataset):
         input_mode: str = "rgb",
         params: SyntheticParams | None = None,
         photo_sources: tuple[str, ...] = (),
+        frame_folders: tuple[str, ...] = (),
+        frames_share: float = 0.0,
     ) -> None:
         self.seed, self.length = seed, length
         self.height_px, self.width_px = height_px, width_px
         self.input_mode = input_mode
         self.params = params or SyntheticParams()
         self.photo_sources = photo_sources
+        self.frame_folders, self.frames_share = frame_folders, frames_share
         self._pool: PhotoPool | None = None
+        self._frames: LabelledFrames | None = None
 
     def __len__(self) -> int:
         return self.length
@@ -697,10 +709,24 @@ class SyntheticWireDataset(torch.utils.data.Dataset):
             self._pool = PhotoPool.load(list(self.photo_sources))
         return self._pool
 
-    def __getitem__(self, index: int) -> tuple[torch.Tensor, torch.Tensor]:
-        image, mask = synthetic_sample(
+    @property
+    def frames(self) -> LabelledFrames:
+        """The labelled frames, loaded on first use (once per DataLoader worker)."""
+        if self._frames is None:
+            self._frames = LabelledFrames(self.frame_folders)
+        return self._frames
+
+    def sample(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Item `index` as an RGB uint8 image and its uint8 {0, 1} mask."""
+        rng = np.random.default_rng([self.seed, index, _FRAMES_STREAM])
+        if self.frame_folders and rng.random() < self.frames_share:
+            return self.frames.crop(rng, self.height_px, self.width_px)
+        return synthetic_sample(
             self.seed, index, self.height_px, self.width_px, self.params, self.pool
         )
+
+    def __getitem__(self, index: int) -> tuple[torch.Tensor, torch.Tensor]:
+        image, mask = self.sample(index)
         x = network_input(image, self.input_mode)  # type: ignore[arg-type]
         return torch.from_numpy(x), torch.from_numpy(mask.astype(np.int64))
 
