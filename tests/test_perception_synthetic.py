@@ -168,8 +168,8 @@ def test_a_share_of_the_items_are_crops_of_labelled_frames(tmp_path):
     (tmp_path / "f").mkdir()
     cv2.imwrite(str(tmp_path / "f" / "a.png"), frame)
     cv2.imwrite(str(tmp_path / "f" / "a_mask.png"), mask)
-    mixed = SyntheticWireDataset(5, 200, 48, 64, frame_folders=(str(tmp_path / "f"),))
-    mixed.frames_share = 0.5
+    folders = (str(tmp_path / "f"),)
+    mixed = SyntheticWireDataset(5, 200, 48, 64, frame_folders=folders, frames_share=0.5)
     sources = []
     for i in range(200):
         image, label = mixed.sample(i)

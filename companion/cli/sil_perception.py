@@ -74,6 +74,7 @@ def scenario_frames(
         bearing = np.arctan2(goal[1] - position[1], goal[0] - position[0])
         yaw = bearing + rng.uniform(-spread.yaw_rad, spread.yaw_rad)
         pitch = rng.uniform(*spread.pitch_rad)
+        # level views draw no roll, so evaluate-sim's frames stay what they were
         roll = rng.normal(0.0, spread.roll_std_rad) if spread.roll_std_rad > 0 else 0.0
         frame = camera.render(float(k), Pose.from_yaw_pitch_roll(yaw, pitch, roll, position))
         frames.append((frame.image_bgr, frame.disparity_px, frame.image_wire_mask))

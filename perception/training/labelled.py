@@ -85,7 +85,7 @@ class LabelledFrames:
                 if image.shape[:2] != mask.shape:
                     raise ValueError(f"{image_path} and {mask_path} differ in size")
                 images.append(image[..., ::-1])
-                masks.append(mask)
+                masks.append(mask.astype(np.uint8))
         self.images, self.masks = images, masks
 
     def __len__(self) -> int:
@@ -96,8 +96,8 @@ class LabelledFrames:
     ) -> tuple[np.ndarray, np.ndarray]:
         """A drawn frame's RGB uint8 (H, W, 3) crop and its uint8 {0, 1} mask, mirrored left
         to right half the time; frames smaller than the crop are resized up first."""
-        k = int(rng.integers(len(self.images)))
-        image, mask = self.images[k], self.masks[k].astype(np.uint8)
+        k = int(rng.integers(len(self)))
+        image, mask = self.images[k], self.masks[k]
         h, w = mask.shape
         scale = max(height_px / h, width_px / w, 1.0)
         if scale > 1.0:
