@@ -193,6 +193,39 @@ def test_calibrate_threshold_records_the_real_photo_ods_threshold_and_mask_uses_
     assert bad.exit_code == 2 and "no image/mask pairs" in bad.output
 
 
+def test_calibrate_threshold_matches_a_reference_models_false_marks_on_wire_free_photos(
+    tmp_path, checkpoint
+):
+    # Photos without wires, with long grey bars: the darker, the more wire-like to a darkness
+    # model. The reference (gain 2) marks the 60 and 90 bars at 0.95; a softer model (gain 1)
+    # scores them 0.96 and 0.85 and the 110 bar 0.695, so at 0.95 it would mark less scenery.
+    data = tmp_path / "negatives"
+    (data / "images").mkdir(parents=True)
+    (data / "masks").mkdir()
+    for i, levels in enumerate([(60, 110), (90, 120), (60, 90, 110)]):
+        image = np.full((60, 80, 3), 230, np.uint8)
+        for k, level in enumerate(levels):
+            image[10 + 15 * k : 13 + 15 * k, 5:75] = level
+        cv2.imwrite(str(data / "images" / f"{i}.png"), image)
+        cv2.imwrite(str(data / "masks" / f"{i}.png"), np.zeros((60, 80), np.uint8))
+    soft = save_checkpoint(tmp_path / "soft.pt", darkness_model(gain=1.0), "k2", "rgb")
+    args = ["calibrate-threshold", str(soft), "--photos", str(data)]
+    result = runner.invoke(app, [*args, "--false-marks-of", str(checkpoint)])
+    assert result.exit_code == 0, result.output
+    calibrated = WireSegmenter.load(soft, runtime="torch")
+    reference = WireSegmenter.load(checkpoint, runtime="torch")
+    assert 0.695 < calibrated.mask_threshold < 0.85  # above the 110 bar, below the 90 bar
+    for image_path in sorted((data / "images").iterdir()):
+        image = cv2.imread(str(image_path))
+        np.testing.assert_array_equal(calibrated.mask(image), reference.mask(image))
+    record = read_checkpoint(soft)["mask_threshold_record"]
+    assert record["reference_threshold"] == 0.95 and record["images"] == 3
+    assert record["false_share"] == pytest.approx(4 * 3 * 70 / (3 * 60 * 80), abs=1e-6)  # 4 bars
+    assert "false marks of the reference" in result.output
+    missing = runner.invoke(app, [*args, "--false-marks-of", str(tmp_path / "none.pt")])
+    assert missing.exit_code == 2 and "no checkpoint" in missing.output
+
+
 def test_evaluate_at_a_size_resizes_images_and_masks(tmp_path, checkpoint):
     data, out = tmp_path / "data", tmp_path / "eval"
     write_dataset(data, "split")  # 60x80 images with 2-px wires

@@ -218,3 +218,28 @@ def test_aerial_model_beats_the_lsd_floor_on_real_uav_photographs(tmp_path):
     # shipped fast model 0.503, the default 0.400.
     assert model["ods_f1"] > 0.57 and model["ods_f1"] > lsd["ods_f1"] + 0.03
     assert model["ap"] > lsd["ap"] + 0.05
+
+
+def test_the_aerial_models_recorded_threshold_marks_real_scenery_as_the_fast_model_does(tmp_path):
+    """Issue 20's calibrated confidence: the aerial weights carry the threshold at which they
+    mark as much of the development set's wire-free photos as the fast weights at 0.95."""
+    from perception.checkpoint import WEIGHTS_DIR
+    from perception.metrics import false_mark_share
+    from perception.postprocess import wire_mask
+    from perception.segmenter import WireSegmenter
+
+    out = tmp_path / "negatives"
+    args = ["real-photos", "--annotations", str(DEV_ANNOTATIONS), "--out", str(out)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0 and "wrote 7 labelled photos" in result.output
+    images = [cv2.imread(str(p)) for p in sorted((out / "images").iterdir())]
+    truths = [np.zeros(im.shape[:2], bool) for im in images]
+    aerial = WireSegmenter.load(WEIGHTS_DIR / "aerial" / f"{FAST_MODEL}_rgb.pt")
+    fast = WireSegmenter.load(params=PerceptionParams(model=FAST_MODEL))
+    assert fast.mask_threshold == 0.95 and 0.95 < aerial.mask_threshold < 0.99  # 0.9713
+    probs = [aerial.probability(im) for im in images]
+    reference = false_mark_share([fast.mask(im) for im in images], truths)  # 0.45%
+    calibrated = false_mark_share([aerial.mask_of(p) for p in probs], truths)  # 0.45%
+    at_095 = false_mark_share([wire_mask(p, aerial.params, 0.95) for p in probs], truths)  # 0.91%
+    assert 0.002 < reference < 0.01 and calibrated <= 1.05 * reference
+    assert at_095 > 1.5 * reference

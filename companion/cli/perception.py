@@ -224,12 +224,25 @@ def calibrate_threshold(
     tolerance_px: Annotated[
         int, typer.Option("--tolerance-px", min=0, help="match radius for thin labels, px")
     ] = 2,
+    reference: Annotated[
+        str | None,
+        typer.Option(
+            "--false-marks-of",
+            help="instead of ODS: the lowest threshold at which the checkpoint marks no more of "
+            "the photos falsely than this model (checkpoint or zoo name) does at its own mask "
+            "threshold; photos without wires are enough",
+        ),
+    ] = None,
 ) -> None:
     """Choose the mask threshold on labelled real photographs and record it with the weights.
 
     The threshold is the ODS one (best F1 over the folders pooled, thesis 2.4.1) at
-    --tolerance-px; `WireSegmenter.mask` uses it instead of 4.4.1's 0.95 (unless
-    perception.mask_threshold_from_weights is false). Never calibrate on an evaluation set.
+    --tolerance-px, or with --false-marks-of the one at which the weights mark as much of the
+    photos' wire-free scenery as a reference model does at its threshold (pixels farther than
+    4 px from a labelled wire, after the speckle filter), so that a retrained model's mask
+    means what the reference's meant. `WireSegmenter.mask` uses it instead of 4.4.1's 0.95
+    (unless perception.mask_threshold_from_weights is false). Never calibrate on an
+    evaluation set.
     """
     from perception.checkpoint import record_mask_threshold
     from perception.training.labelled import image_mask_pairs
@@ -241,21 +254,57 @@ def calibrate_threshold(
     if not pairs:
         raise typer.BadParameter("no image/mask pairs in the --photos folders")
     segmenter = load_segmenter(str(checkpoint), "auto")
+    chosen_on = {"chosen_on": [str(f) for f in folders], "images": len(pairs)}
+    if reference is None:
+        threshold, record = ods_threshold(segmenter, pairs, tolerance_px)
+    else:
+        threshold, record = matched_false_marks_threshold(
+            segmenter, load_segmenter(str(resolve_checkpoint(reference)), "auto"), pairs
+        )
+        record["reference"] = reference
+    record_mask_threshold(checkpoint, threshold, {**record, **chosen_on})
+    typer.echo(
+        f"mask threshold {threshold:.4f} ({record['method']}, {len(pairs)} photos) "
+        f"recorded in {checkpoint}"
+    )
+
+
+def ods_threshold(segmenter: Any, pairs: list, tolerance_px: int) -> tuple[float, dict]:
+    """The ODS threshold of a segmenter on image/mask pairs, and how it scored (2.4.1)."""
     scorer = partial(segmenter.probability, channel_order="bgr")
     m = dataset_metrics(pairs, {"model": scorer}, tolerance_px)["model"]
-    record = {
-        "chosen_on": [str(f) for f in folders],
-        "images": m.n_images,
+    return m.ods_threshold, {
+        "method": f"ODS-F {m.ods_f1:.3f} at {tolerance_px} px",
         "tolerance_px": tolerance_px,
         "ods_f1": round(m.ods_f1, 4),
         "ods_precision": round(m.ods_precision, 4),
         "ods_recall": round(m.ods_recall, 4),
     }
-    record_mask_threshold(checkpoint, m.ods_threshold, record)
-    typer.echo(
-        f"mask threshold {m.ods_threshold:.4f} (ODS-F {m.ods_f1:.3f} at {tolerance_px} px on "
-        f"{m.n_images} photos) recorded in {checkpoint}"
+
+
+def matched_false_marks_threshold(segmenter: Any, reference: Any, pairs: list) -> tuple:
+    """The threshold at which `segmenter` marks as much of the photos falsely as `reference`
+    does at its own mask threshold, and the shares it was chosen on."""
+    from perception.metrics import false_mark_share, threshold_for_false_share
+    from perception.postprocess import wire_mask
+    from perception.training.labelled import read_image, read_mask
+
+    images = [read_image(image_path) for image_path, _ in pairs]
+    truths = [read_mask(mask_path) for _, mask_path in pairs]
+    for (image_path, mask_path), image, truth in zip(pairs, images, truths, strict=True):
+        if truth.shape != image.shape[:2]:
+            raise typer.BadParameter(f"{mask_path} is {truth.shape}, {image_path} is not")
+    reference_masks = [reference.mask(image) for image in images]
+    target = false_mark_share(reference_masks, truths)
+    probs = [segmenter.probability(image) for image in images]
+    threshold = threshold_for_false_share(
+        probs, truths, target, lambda prob, t: wire_mask(prob, segmenter.params, t)
     )
+    return threshold, {
+        "method": f"false marks of the reference at {reference.mask_threshold:.4f}",
+        "reference_threshold": reference.mask_threshold,
+        "false_share": round(target, 6),
+    }
 
 
 def evaluate(
