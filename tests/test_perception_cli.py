@@ -95,6 +95,10 @@ def test_evaluate_prints_the_table_and_saves_the_pr_curve(tmp_path, checkpoint):
     assert model_row["images"] == 3 and model_row["tolerance_px"] == 1
     # the darkness model scores the speck as wire too, but far below the wire's confidence
     assert model_row["ap"] > 0.95 and model_row["ods_f1"] > 0.95
+    # where its masks cut (0.95, none recorded): every wire pixel and the 2x2 speck per image
+    assert model_row["mask_threshold"] == 0.95 and model_row["mask_recall"] == 1.0
+    assert model_row["mask_precision"] == pytest.approx(160 / 164, abs=1e-4)
+    assert "mask_f1" in result.output and "mask_f1" not in lsd_row
     # Hough lines find the straight dark lines (ODS-F 0.82 measured) but mark more than the
     # model does around them: the table must rank the baseline below the model
     assert 0.6 < baseline_row["ods_f1"] < model_row["ods_f1"] - 0.05

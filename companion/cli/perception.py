@@ -112,9 +112,11 @@ def detect(
         raise typer.Exit(code=1)
 
 
-def metrics_row(name: str, m: Any) -> dict[str, Any]:
-    """One table row (JSON-ready) of a `perception.metrics.Metrics`."""
-    return {
+def metrics_row(name: str, m: Any, at_mask: Any = None) -> dict[str, Any]:
+    """One table row (JSON-ready) of a `perception.metrics.Metrics`; with `at_mask` (the
+    metrics at a model's mask threshold alone) also `mask_threshold`, `mask_precision`,
+    `mask_recall` and `mask_f1`: the probability thresholded where the model masks."""
+    row = {
         "name": name,
         "ap": round(m.ap, 4),
         "roc_auc": round(m.roc_auc, 4),
@@ -126,15 +128,22 @@ def metrics_row(name: str, m: Any) -> dict[str, Any]:
         "images": m.n_images,
         "tolerance_px": m.tolerance_px,
     }
+    if at_mask is not None:
+        row["mask_threshold"] = round(at_mask.ods_threshold, 4)
+        row["mask_precision"] = round(at_mask.ods_precision, 4)
+        row["mask_recall"] = round(at_mask.ods_recall, 4)
+        row["mask_f1"] = round(at_mask.ods_f1, 4)
+    return row
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
     """Plain-text table of metric rows (thesis Table 2.4 columns, plus OIS)."""
-    cols = ["ap", "roc_auc", "ods_f1", "ods_threshold", "ois_f1", "images"]
+    cols = ["ap", "roc_auc", "ods_f1", "ods_threshold", "ois_f1", "mask_f1", "images"]
     width = max(len("model"), *(len(r["name"]) for r in rows))
     lines = [f"{'model':<{width}}  " + "  ".join(f"{c:>13}" for c in cols)]
     for r in rows:
-        lines.append(f"{r['name']:<{width}}  " + "  ".join(f"{r[c]:>13}" for c in cols))
+        cells = "  ".join(f"{r.get(c, '-'):>13}" for c in cols)
+        lines.append(f"{r['name']:<{width}}  " + cells)
     return "\n".join(lines)
 
 
@@ -193,17 +202,21 @@ def dataset_metrics(
     scorers: dict[str, Any],
     tolerance_px: int,
     size_hw_px: tuple[int, int] | None = None,
-) -> dict[str, Any]:
+    mask_thresholds: dict[str, float] | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """{name: `perception.metrics.Metrics`} of each scorer (BGR image -> (H, W) scores) over
     (image, mask) file pairs, streamed: one image in memory at a time; with `size_hw_px` every
-    pair is first resized to it (`resized_pair`)."""
+    pair is first resized to it (`resized_pair`). Second: {name: Metrics at that threshold
+    alone} of the scorers in `mask_thresholds` (their `ods_*` are the scores there)."""
     from tqdm import tqdm
 
     from perception.metrics import image_counts, metrics_from_counts, validated_thresholds
     from perception.training.labelled import read_image, read_mask
 
     thresholds = validated_thresholds()
+    single = {k: np.array([t], np.float64) for k, t in (mask_thresholds or {}).items()}
     counts: dict[str, list] = {k: [] for k in scorers}
+    at_mask: dict[str, list] = {k: [] for k in single}
     for image_path, mask_path in tqdm(pairs, desc="evaluate", unit="img", file=sys.stderr):
         image, mask = read_image(image_path), read_mask(mask_path)
         if mask.shape != image.shape[:2]:
@@ -211,8 +224,14 @@ def dataset_metrics(
         if size_hw_px is not None:
             image, mask = resized_pair(image, mask, size_hw_px)
         for key, scorer in scorers.items():
-            counts[key].append(image_counts(scorer(image), mask, thresholds, tolerance_px))
-    return {k: metrics_from_counts(c, thresholds, tolerance_px) for k, c in counts.items()}
+            scores = scorer(image)
+            counts[key].append(image_counts(scores, mask, thresholds, tolerance_px))
+            if key in single:
+                at_mask[key].append(image_counts(scores, mask, single[key], tolerance_px))
+    return (
+        {k: metrics_from_counts(c, thresholds, tolerance_px) for k, c in counts.items()},
+        {k: metrics_from_counts(c, single[k], tolerance_px) for k, c in at_mask.items()},
+    )
 
 
 def calibrate_threshold(
@@ -272,7 +291,7 @@ def calibrate_threshold(
 def ods_threshold(segmenter: Any, pairs: list, tolerance_px: int) -> tuple[float, dict]:
     """The ODS threshold of a segmenter on image/mask pairs, and how it scored (2.4.1)."""
     scorer = partial(segmenter.probability, channel_order="bgr")
-    m = dataset_metrics(pairs, {"model": scorer}, tolerance_px)["model"]
+    m = dataset_metrics(pairs, {"model": scorer}, tolerance_px)[0]["model"]
     return m.ods_threshold, {
         "method": f"ODS-F {m.ods_f1:.3f} at {tolerance_px} px",
         "tolerance_px": tolerance_px,
@@ -343,6 +362,9 @@ def evaluate(
 
     The table always has an "LSD baseline" row beside the models: LSD line segments drawn
     2 px wide and scored by length, the classical floor a wire CNN must beat (issue 20).
+    Each model row also scores the probability at the model's mask threshold (`mask_f1`, and
+    `mask_threshold`, `mask_precision`, `mask_recall` in metrics.json): the operating point
+    its masks fly with (4.4.1's 0.95, or the threshold recorded with the weights).
     """
     from perception.baseline import candamo_scores, lsd_scores
     from perception.segmenter import as_rgb
@@ -355,17 +377,20 @@ def evaluate(
         typer.echo(f"warning: no mask for {image}; skipped", err=True)
     if not pairs:
         raise typer.BadParameter(f"no image/mask pairs in {folder} (see `--help` for layouts)")
-    scorers = {}
+    scorers, mask_thresholds = {}, {}
     checkpoint = None if only_baseline else resolve_checkpoint(model)
     for runtime in [] if only_baseline else runtimes or ["auto"]:
         segmenter = load_segmenter(str(checkpoint), runtime)
         name = f"{segmenter.arch} ({segmenter.input_mode}, {segmenter.runtime.name})"
         scorers[name] = partial(segmenter.probability, channel_order="bgr")
+        mask_thresholds[name] = segmenter.mask_threshold
     scorers["LSD baseline"] = lambda bgr: lsd_scores(as_rgb(bgr, "bgr"))
     if baseline or only_baseline:
         scorers["Candamo baseline"] = lambda bgr: candamo_scores(as_rgb(bgr, "bgr"))
-    results = dataset_metrics(pairs, scorers, tolerance_px, parse_size(size))
-    rows = [metrics_row(k, m) for k, m in results.items()]
+    results, at_mask = dataset_metrics(
+        pairs, scorers, tolerance_px, parse_size(size), mask_thresholds
+    )
+    rows = [metrics_row(k, m, at_mask.get(k)) for k, m in results.items()]
     typer.echo(format_table(rows))
     out.mkdir(parents=True, exist_ok=True)
     save_pr_plot(results, out / "pr_curve.png", tolerance_px)
