@@ -258,8 +258,7 @@ class MaskScore:
         """The counts of one (H, W) bool `mask` against its (H, W) bool `truth`."""
         mask, truth = np.asarray(mask, bool), np.asarray(truth, bool)
         near_mask = cv2.dilate(mask.astype(np.uint8), disk_kernel(_RECALL_TOLERANCE_PX)) > 0
-        near_wire = cv2.dilate(truth.astype(np.uint8), disk_kernel(_FALSE_DISTANCE_PX)) > 0
-        false_px = int((mask & ~near_wire).sum())
+        false_px = int((mask & far_from_wires(truth)).sum())
         return cls(
             int(truth.sum()),
             int((truth & near_mask).sum()),
@@ -282,11 +281,22 @@ class MaskScore:
         }
 
 
+def far_from_wires(truth: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels farther than 4 px from any pixel of the (H, W) true wire mask,
+    where a mask pixel is a false mark (`MaskScore`)."""
+    near = cv2.dilate(np.asarray(truth, np.uint8), disk_kernel(_FALSE_DISTANCE_PX)) > 0
+    return ~near
+
+
+def _pooled_false_share(masks: Sequence[np.ndarray], far: Sequence[np.ndarray]) -> float:
+    false_px = sum(int((np.asarray(m, bool) & f).sum()) for m, f in zip(masks, far, strict=True))
+    return false_px / max(sum(f.size for f in far), 1)
+
+
 def false_mark_share(masks: Sequence[np.ndarray], truths: Sequence[np.ndarray]) -> float:
     """Share of all pixels of the images that their masks mark falsely (`MaskScore`: farther
     than 4 px from any true wire), pooled over the images."""
-    false_px = sum(MaskScore.of(m, t).false_px for m, t in zip(masks, truths, strict=True))
-    return false_px / max(sum(np.asarray(t).size for t in truths), 1)
+    return _pooled_false_share(masks, [far_from_wires(t) for t in truths])
 
 
 def threshold_for_false_share(
@@ -305,8 +315,10 @@ def threshold_for_false_share(
     since a thresholded, speckle-filtered mask only loses pixels as the threshold rises.
     """
 
+    far = [far_from_wires(t) for t in truths]
+
     def share(threshold: float) -> float:
-        return false_mark_share([mask_at(p, threshold) for p in probs], truths)
+        return _pooled_false_share([mask_at(p, threshold) for p in probs], far)
 
     low, high = 0.5, 1.0 - resolution
     if share(low) <= target_share:

@@ -278,7 +278,7 @@ def calibrate_threshold(
         threshold, record = ods_threshold(segmenter, pairs, tolerance_px)
     else:
         threshold, record = matched_false_marks_threshold(
-            segmenter, load_segmenter(str(resolve_checkpoint(reference)), "auto"), pairs
+            segmenter, load_segmenter(reference, "auto"), pairs
         )
         record["reference"] = reference
     record_mask_threshold(checkpoint, threshold, {**record, **chosen_on})
