@@ -15,6 +15,7 @@ from geometry.pose import Pose
 from geometry.shapes import Box, Wire
 from hil.sensors.cameras import SimulatedStereoCamera
 from hil.sensors.params import CameraSimParams
+from hil.sensors.shading import wire_glint
 from hil.sensors.wires import project_wires
 from hil.world.model import Checkerboard, Lighting, Solid, World
 from mapping.droan.calibration import (
@@ -117,6 +118,23 @@ def test_a_thin_wire_is_in_the_colour_image_but_not_in_the_disparity() -> None:
     assert 0.7 * width < np.median(darkening) < 1.1 * width
     # stereo misses it: the disparity there shows the sky behind it (no return)
     assert frame.wire_mask.any() and np.all(frame.disparity_px[frame.wire_mask] == 0.0)
+
+
+def test_a_sunlit_wire_glints_brighter_than_the_sky_where_the_eye_lies_on_its_reflection_cone():
+    # the reflection keeps the sun's component along the axis, reversed: on the cone, full glint
+    assert wire_glint(np.array([0.5]), np.array([-0.5]), 16.0) == pytest.approx(1.0)
+    assert wire_glint(np.array([0.5]), np.array([0.5]), 16.0) < 1e-4  # the mirror side: none
+    wire = Wire.straight([6.0, -30.0, -6.0], [6.0, 30.0, -6.0], radius_m=0.02)
+    world = World(wires=[wire], ground_down_m=1000.0, lighting=BEHIND, wire_albedos=[0.2])
+    contrast = {}
+    for specular in (0.0, 0.5):
+        frame = camera(world, wire_specular=specular, **CLEAN).render(0.0, LEVEL)
+        luma = frame.image_bgr.astype(float).mean(axis=2)
+        centre = slice(luma.shape[1] // 2 - 10, luma.shape[1] // 2 + 10)  # eye on the cone
+        r = int(np.argmax(frame.image_wire_mask.sum(axis=1)))  # the wire's row
+        contrast[specular] = luma[r, centre].mean() - luma[[r - 3, r + 3], centre].mean()
+    # measured -14 and +57 levels: matte, dark against the sky; metal in the sun, brighter
+    assert contrast[0.0] < -8 and contrast[0.5] > 30
 
 
 def test_wide_wires_appear_in_stereo_with_holes_and_solids_hide_wires() -> None:

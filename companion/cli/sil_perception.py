@@ -128,6 +128,7 @@ def sil_frames(
         "frames": index,
         "wire_pixel_share": wire_pixels / max(index * truth.size, 1),
         "poses": asdict(TRAINING_POSES),
+        "camera_sim": settings.camera_sim.model_dump(include={"wire_specular", "wire_gloss"}),
     }
     (out / "sil_frames.json").write_text(json.dumps(record, indent=2) + "\n")
     typer.echo(json.dumps(record))

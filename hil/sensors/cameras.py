@@ -181,6 +181,8 @@ class SimulatedStereoCamera:
                 wires.tangent_ned.reshape(-1, 3)[rows],
                 wires.wire.ravel()[rows],
                 view,
+                self.params.wire_specular,
+                self.params.wire_gloss,
             )
             flat = radiance.reshape(-1, 3)
             cover = wires.coverage.ravel()[rows][:, None]

@@ -71,6 +71,16 @@ class CameraSimParams(BaseModel):
         description="a wire appears in the disparity image only where it is at least this wide "
         "(stereo matching misses thin wires), px",
     )
+    wire_specular: float = Field(
+        0.0,
+        ge=0,
+        le=2,
+        description="strength of the sun's glint on the wires (Kajiya-Kay's cylinder highlight: "
+        "a sunlit metal conductor can be brighter than the sky behind it); 0 = matte wires",
+    )
+    wire_gloss: float = Field(
+        16.0, ge=1, le=500, description="exponent of that glint: higher is a narrower highlight"
+    )
     stereo_wire_fill: float = Field(
         0.5,
         ge=0,

@@ -334,10 +334,17 @@ def _lit_surfaces(
 
 
 def wire_radiance(
-    world: World, sky: SkyModel, tangent_ned: np.ndarray, wire: np.ndarray, view_ned: np.ndarray
+    world: World,
+    sky: SkyModel,
+    tangent_ned: np.ndarray,
+    wire: np.ndarray,
+    view_ned: np.ndarray,
+    specular: float = 0.0,
+    gloss: float = 16.0,
 ) -> np.ndarray:
     """`(N, 3)` radiance of wire pixels: `tangent_ned` (N, 3) wire directions, `wire` (N,)
-    indices, `view_ned` (N, 3) unit directions from the camera to the wire."""
+    indices, `view_ned` (N, 3) unit directions from the camera to the wire; `specular` and
+    `gloss` add the sun's glint (`wire_glint`)."""
     albedo = np.array(world.wire_albedos, np.float32)[wire]
     s = sky.sun_ned
     along = tangent_ned @ s
@@ -350,4 +357,19 @@ def wire_radiance(
     )
     diffuse = across * 0.5 * (1.0 + cos_phase) * 0.7
     irradiance = sky.ambient_rgb * 0.6 + sky.sun_rgb * diffuse[:, None]
-    return albedo[:, None] * irradiance
+    radiance = albedo[:, None] * irradiance
+    if specular > 0:
+        glint = wire_glint(along, -(view_ned * tangent_ned).sum(1), gloss)
+        radiance = radiance + specular * glint[:, None] * sky.sun_rgb
+    return radiance
+
+
+def wire_glint(sun_along: np.ndarray, eye_along: np.ndarray, gloss: float) -> np.ndarray:
+    """`(N,)` Kajiya-Kay highlight of a cylinder, (sin_L sin_E - cos_L cos_E)^gloss: a mirror
+    cylinder reflects the sun into a cone about its axis (the reflection keeps the light's
+    component along the axis, reversed), so it glints where the eye lies on that cone.
+    `sun_along`, `eye_along`: cosines of the directions to the sun and to the eye with the
+    wire's axis."""
+    sin_sun = np.sqrt(np.maximum(1.0 - sun_along**2, 0.0))
+    sin_eye = np.sqrt(np.maximum(1.0 - eye_along**2, 0.0))
+    return np.maximum(sin_sun * sin_eye - sun_along * eye_along, 0.0) ** gloss
