@@ -339,8 +339,8 @@ def wire_radiance(
     tangent_ned: np.ndarray,
     wire: np.ndarray,
     view_ned: np.ndarray,
-    specular: float = 0.0,
-    gloss: float = 16.0,
+    specular: float,
+    gloss: float,
 ) -> np.ndarray:
     """`(N, 3)` radiance of wire pixels: `tangent_ned` (N, 3) wire directions, `wire` (N,)
     indices, `view_ned` (N, 3) unit directions from the camera to the wire; `specular` and
@@ -351,7 +351,8 @@ def wire_radiance(
     across = np.sqrt(np.maximum(1.0 - along**2, 0.0))  # sun perpendicular to the wire: bright
     # the share of the lit half-cylinder the camera sees (1 with the sun behind the camera)
     s_perp = s[None, :] - along[:, None] * tangent_ned
-    v_perp = -view_ned + (view_ned * tangent_ned).sum(1, keepdims=True) * tangent_ned
+    view_along = (view_ned * tangent_ned).sum(1)
+    v_perp = -view_ned + view_along[:, None] * tangent_ned
     cos_phase = (s_perp * v_perp).sum(1) / np.maximum(
         np.linalg.norm(s_perp, axis=1) * np.linalg.norm(v_perp, axis=1), 1e-6
     )
@@ -359,7 +360,7 @@ def wire_radiance(
     irradiance = sky.ambient_rgb * 0.6 + sky.sun_rgb * diffuse[:, None]
     radiance = albedo[:, None] * irradiance
     if specular > 0:
-        glint = wire_glint(along, -(view_ned * tangent_ned).sum(1), gloss)
+        glint = wire_glint(along, -view_along, gloss)
         radiance = radiance + specular * glint[:, None] * sky.sun_rgb
     return radiance
 
