@@ -130,6 +130,14 @@ def test_the_sweep_summary_counts_failures_and_clearances() -> None:
         {"scenario": "b", "seed": 1, "collisions": 1, "mission_state": None, "failure": "x",
          "recording": None}
     ]  # fmt: skip
+    again = sweep_summary([*flights, {**flights[1], "success": True, "collisions": 0}])
+    assert again["by_scenario"] == {
+        "a": {"runs": 1, "successes": 1, "collisions": 0, "min_wire_clearance_m": 1.0},
+        "b": {"runs": 2, "successes": 1, "collisions": 1, "min_wire_clearance_m": None},
+    }
+    assert [(s["scenario"], s["seed"], s["successes"], s["runs"]) for s in again["by_seed"]] == [
+        ("a", 0, 1, 1), ("b", 1, 1, 2)
+    ]  # fmt: skip
 
 
 def test_a_sweep_can_extend_an_earlier_one_by_its_first_seed() -> None:
@@ -138,6 +146,16 @@ def test_a_sweep_can_extend_an_earlier_one_by_its_first_seed() -> None:
     assert {(s.config, s.inference_threads, s.world_file) for s in specs} == {("s.toml", 1, None)}
     result = CliRunner().invoke(app, ["sweep", "--first-seed", "-1", "--json"])
     assert result.exit_code == 2 and "--first-seed" in result.output
+
+
+def test_a_sweep_flies_each_seed_as_often_as_repeated(tmp_path: Path) -> None:
+    specs = sweep_specs(["a"], range(2), None, 1, tmp_path, repeats=2)
+    assert [(s.scenario, s.seed, Path(s.record).name) for s in specs] == [
+        ("a", 0, "a-0-1.mcap"), ("a", 0, "a-0-2.mcap"),
+        ("a", 1, "a-1-1.mcap"), ("a", 1, "a-1-2.mcap"),
+    ]  # fmt: skip
+    result = CliRunner().invoke(app, ["sweep", "--repeat", "0", "--json"])
+    assert result.exit_code == 2 and "--repeat" in result.output
 
 
 def test_a_sweep_keeps_only_the_recordings_of_its_failed_flights(tmp_path: Path) -> None:

@@ -300,24 +300,35 @@ _FLIGHT_KEYS = ("scenario", "seed", "success", "collisions", "min_clearance_m",
                 "min_wire_clearance_m", "duration_s", "wall_s")  # fmt: skip
 
 
+def _tally(results: list[dict]) -> dict:
+    """Flights, successes, collisions and the closest wire pass of `results`."""
+    wires = [r["min_wire_clearance_m"] for r in results]
+    wires = [w for w in wires if w is not None]
+    return {
+        "runs": len(results),
+        "successes": sum(bool(r["success"]) for r in results),
+        "collisions": sum(int(r.get("collisions") or 0) for r in results),
+        "min_wire_clearance_m": min(wires) if wires else None,
+    }
+
+
 def sweep_summary(results: list[dict]) -> dict:
-    """The sweep's JSON: `runs`, `success_rate`, `collisions`, `min_clearance_m` and more."""
+    """The sweep's JSON: `runs`, `success_rate`, `collisions`, `min_clearance_m` and more;
+    `by_scenario` and `by_seed` tally the flights of each scenario and of each of its seeds
+    (a seed flown `--repeat` times: flights are not repeatable, see README)."""
     clearances = [r["min_clearance_m"] for r in results if r.get("min_clearance_m") is not None]
-    wires = [
-        r["min_wire_clearance_m"] for r in results if r.get("min_wire_clearance_m") is not None
-    ]
     latencies = [
         r["frame_to_setpoint_ms_p99"] for r in results if r.get("frame_to_setpoint_ms_p99")
     ]
-    runs = len(results)
-    successes = sum(bool(r["success"]) for r in results)
+    total = _tally(results)
+    runs, successes = total["runs"], total["successes"]
     return {
         "runs": runs,
         "success_rate": round(successes / runs, 4) if runs else 0.0,
         "successes": successes,
-        "collisions": sum(int(r.get("collisions") or 0) for r in results),
+        "collisions": total["collisions"],
         "min_clearance_m": min(clearances) if clearances else None,
-        "min_wire_clearance_m": min(wires) if wires else None,
+        "min_wire_clearance_m": total["min_wire_clearance_m"],
         "frame_to_setpoint_ms_p99_max": max(latencies) if latencies else None,
         "failures": [
             {
@@ -327,8 +338,24 @@ def sweep_summary(results: list[dict]) -> dict:
             for r in results
             if not r["success"]
         ],
+        "by_scenario": {
+            name: _tally([r for r in results if r["scenario"] == name])
+            for name in dict.fromkeys(r["scenario"] for r in results)
+        },
+        "by_seed": [
+            {"scenario": name, "seed": seed, **_tally(group)}
+            for (name, seed), group in _grouped(results).items()
+        ],
         "flights": [{k: r.get(k) for k in _FLIGHT_KEYS} for r in results],
     }
+
+
+def _grouped(results: list[dict]) -> dict[tuple[str, int], list[dict]]:
+    """`results` by (scenario, seed), in the order first flown."""
+    groups: dict[tuple[str, int], list[dict]] = {}
+    for r in results:
+        groups.setdefault((r["scenario"], r["seed"]), []).append(r)
+    return groups
 
 
 def sweep_specs(
@@ -337,21 +364,26 @@ def sweep_specs(
     config: Path | None,
     threads: int | None,
     record_dir: Path | None = None,
+    repeats: int = 1,
 ) -> list[FlightSpec]:
-    """One flight of each scenario in `names` with each seed, scenario by scenario, each
-    recorded to `record_dir`/SCENARIO-SEED.mcap when given."""
+    """`repeats` flights of each scenario in `names` with each seed, scenario by scenario,
+    each recorded to `record_dir`/SCENARIO-SEED.mcap (SCENARIO-SEED-R.mcap, R from 1, when
+    repeated) when given."""
     settings = str(config) if config else None
+
+    def record(name: str, seed: int, repeat: int) -> str | None:
+        if record_dir is None:
+            return None
+        stem = f"{name}-{seed}" if repeats == 1 else f"{name}-{seed}-{repeat}"
+        return str(record_dir / f"{stem}.mcap")
+
     return [
         FlightSpec(
-            name,
-            seed,
-            None,
-            settings,
-            inference_threads=threads,
-            record=None if record_dir is None else str(record_dir / f"{name}-{seed}.mcap"),
+            name, seed, None, settings, inference_threads=threads, record=record(name, seed, r)
         )
         for name in names
         for seed in seeds
+        for r in range(1, repeats + 1)
     ]
 
 
@@ -368,6 +400,15 @@ def sweep(
             "--first-seed", min=0, help="the first seed F (extend an earlier sweep of 0..F-1)"
         ),
     ] = 0,
+    repeat: Annotated[
+        int,
+        typer.Option(
+            "--repeat",
+            min=1,
+            help="fly each scenario and seed this many times (flights are not repeatable: "
+            "`by_seed` tells a seed that always fails from one that sometimes does)",
+        ),
+    ] = 1,
     jobs: Annotated[int, typer.Option("--jobs", min=1, help="flights in parallel")] = 2,
     address: Annotated[
         str | None,
@@ -401,7 +442,7 @@ def sweep(
     if record_failures is not None:
         record_failures.mkdir(parents=True, exist_ok=True)
     seed_range = range(first_seed, first_seed + seeds)
-    specs = sweep_specs(names, seed_range, config, threads, record_failures)
+    specs = sweep_specs(names, seed_range, config, threads, record_failures, repeat)
     results = _run_on_ray(specs, address) if address else _run_locally(specs, jobs)
     summary = sweep_summary(results)
     if json_output:
@@ -413,6 +454,13 @@ def sweep(
                 f"{'PASS' if flight['success'] else 'FAIL'}  collisions {flight['collisions']}  "
                 f"clearance {flight['min_clearance_m']} m, "
                 f"wires {flight['min_wire_clearance_m']} m"
+            )
+        tallies = [(f"{s['scenario']} seed {s['seed']}", s) for s in summary["by_seed"]]
+        tallies = (tallies if repeat > 1 else []) + list(summary["by_scenario"].items())
+        for name, tally in tallies:
+            typer.echo(
+                f"{name:<30} {tally['successes']}/{tally['runs']} succeeded, "
+                f"{tally['collisions']} collisions, wires {tally['min_wire_clearance_m']} m"
             )
         typer.echo(
             f"{summary['successes']}/{summary['runs']} succeeded ({summary['success_rate']:.1%}), "
