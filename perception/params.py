@@ -52,16 +52,15 @@ class PerceptionParams(BaseModel):
         "46 and 8 flights with strikes at 0",
     )
     wire_continuation_stops_at_surfaces: bool = Field(
-        False,
-        description="opt-in: a continuation stops where stereo sees a surface (most disparity "
+        True,
+        description="a continuation stops where stereo sees a surface (most disparity "
         "pixels of a colour pixel hold a return, 3 such pixels in a row), so wires are "
         "continued across the sky and the far background, where the CNN misses them, not "
-        "across the ground, where its straight false marks (shadows of poles and wires) lie. "
-        "Measured 2026-12-06 (docs/closed-loop-log.md): on 432 SIL frames the continued "
-        "mask's wire recall 0.545 "
-        "and false share 0.34 against 0.583 and 0.50 without it (0.483 and 0.27 not continued); "
-        "sweep seeds 0-5 27 of 36 and 1 strike (random seed 5 at 0.30 m; a reflight passed at "
-        "0.58 m)",
+        "across the ground, where its straight false marks (shadows of trees, poles and wires) "
+        "lie. On 432 SIL frames the continued mask's wire recall 0.545 and false share 0.34 "
+        "against 0.583 and 0.50 without it (0.483 and 0.27 not continued). Sweeps side by side "
+        "on 2026-12-07 (docs/closed-loop-log.md), seeds 0-11: 49 of 72, no strike, against "
+        "40-43 of 72 and one strike without it",
     )
     wire_continuation_min_length_px: float = Field(
         30.0, ge=1, le=10_000, description="shortest mask component that is continued, px"
