@@ -302,7 +302,7 @@ _FLIGHT_KEYS = ("scenario", "seed", "success", "collisions", "min_clearance_m",
 
 def _tally(results: list[dict]) -> dict:
     """Flights, successes, collisions and the closest wire pass of `results`."""
-    wires = [r["min_wire_clearance_m"] for r in results]
+    wires = [r.get("min_wire_clearance_m") for r in results]
     wires = [w for w in wires if w is not None]
     return {
         "runs": len(results),
