@@ -339,22 +339,21 @@ def sweep_summary(results: list[dict]) -> dict:
             if not r["success"]
         ],
         "by_scenario": {
-            name: _tally([r for r in results if r["scenario"] == name])
-            for name in dict.fromkeys(r["scenario"] for r in results)
+            name: _tally(group) for (name,), group in _grouped(results, "scenario").items()
         },
         "by_seed": [
             {"scenario": name, "seed": seed, **_tally(group)}
-            for (name, seed), group in _grouped(results).items()
+            for (name, seed), group in _grouped(results, "scenario", "seed").items()
         ],
         "flights": [{k: r.get(k) for k in _FLIGHT_KEYS} for r in results],
     }
 
 
-def _grouped(results: list[dict]) -> dict[tuple[str, int], list[dict]]:
-    """`results` by (scenario, seed), in the order first flown."""
-    groups: dict[tuple[str, int], list[dict]] = {}
+def _grouped(results: list[dict], *keys: str) -> dict[tuple, list[dict]]:
+    """`results` by their values of `keys`, in the order first flown."""
+    groups: dict[tuple, list[dict]] = {}
     for r in results:
-        groups.setdefault((r["scenario"], r["seed"]), []).append(r)
+        groups.setdefault(tuple(r[k] for k in keys), []).append(r)
     return groups
 
 
