@@ -78,3 +78,29 @@ def test_bless_takes_the_replayed_outputs_as_the_new_reference(
     original = [m.payload for m in iter_recorded([BLESSED], {"/vehicle", "/camera/disparity"})]
     blessed = [m.payload for m in iter_recorded([copy], {"/vehicle", "/camera/disparity"})]
     assert original == blessed
+
+
+def test_a_probe_says_when_the_replayed_map_first_held_a_point() -> None:
+    """`--probe`: the pole beside the path (5, 2.5) is held from the first frames, the wire
+    (9, 0, 2 m up) only once the flight has come close, and a point far behind the take-off
+    is never seen; probing changes nothing in the replay itself."""
+    probes = ["--probe", "9,0,-2", "--probe", "5,2.5,-2", "--probe", "-60,0,-1.5"]
+    result = CliRunner().invoke(app, ["replay", str(BLESSED), "--json", *probes])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    assert out["divergences"] == 0
+    wire, pole, behind = (p["changes"] for p in out["probes"])
+    assert out["probes"][0]["point_ned_m"] == [9.0, 0.0, -2.0]
+
+    def first_collision_s(changes: list[dict]) -> float:
+        return min(c["t_s"] for c in changes if c["collision"])
+
+    assert first_collision_s(pole) < 2.0 < first_collision_s(wire)
+    assert all(c["seen"] for c in wire[1:]) and wire[0]["t_s"] <= pole[0]["t_s"]
+    assert len(behind) == 1 and not behind[0]["seen"] and not behind[0]["collision"]
+
+
+def test_a_malformed_probe_is_refused_with_the_expected_form() -> None:
+    result = CliRunner().invoke(app, ["replay", str(BLESSED), "--probe", "9,0"])
+    assert result.exit_code == 2
+    assert "N,E,D" in result.output

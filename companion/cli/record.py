@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 log_app = typer.Typer(
@@ -60,6 +62,14 @@ def replay(
             "the regression data's new reference)",
         ),
     ] = False,
+    probe: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--probe",
+            help="N,E,D (local NED, m): report when the replayed map first held this point, "
+            "and each planning cycle at which its answer changed (repeat for more points)",
+        ),
+    ] = None,
 ) -> None:
     """Re-run perception, mapping and planning on a recording's inputs and report where their
     outputs differ from the recorded ones (first divergence, counts, largest difference per
@@ -76,6 +86,7 @@ def replay(
         raise typer.BadParameter(str(e)) from e
     if bless and len(parts) > 1:
         raise typer.BadParameter("--bless rewrites one-part recordings only")
+    probes = _probe_points(probe or [])
     live = None
     if view:
         from companion.view.live import LiveView
@@ -83,7 +94,10 @@ def replay(
         live = LiveView.start(settings, view_port)
     try:
         result, replayer = run_replay(
-            parts, settings, on_replayed=None if live is None else live.on_replayed
+            parts,
+            settings,
+            on_replayed=None if live is None else live.on_replayed,
+            probes_ned_m=probes,
         )
     finally:
         if live is not None:
@@ -108,7 +122,30 @@ def replay(
             typer.echo(f"first divergence: {json.dumps(out['first_divergence'])}")
         if bless:
             typer.echo(f"blessed: {out['blessed']}")
+        for p in out.get("probes", []):
+            typer.echo(f"probe {p['point_ned_m']}:")
+            for c in p["changes"]:
+                typer.echo(
+                    f"  {c['t_s']:9.2f} s  collision {c['collision']!s:<5} solid "
+                    f"{c['solid']!s:<5} seen {c['seen']!s:<5} occupancy {c['occupancy']}"
+                )
     raise typer.Exit(0 if bless or out["divergences"] == 0 else 1)
+
+
+def _probe_points(texts: list[str]) -> np.ndarray | None:
+    """`(P, 3)` NED points from `--probe N,E,D` texts (None without any)."""
+    if not texts:
+        return None
+    points = []
+    for text in texts:
+        try:
+            point = [float(v) for v in text.split(",")]
+        except ValueError:
+            point = []
+        if len(point) != 3 or not all(math.isfinite(v) for v in point):
+            raise typer.BadParameter(f"--probe {text!r}: expected N,E,D in metres, e.g. 9,0,-2")
+        points.append(point)
+    return np.array(points)
 
 
 def register(app: typer.Typer, bench: typer.Typer) -> None:

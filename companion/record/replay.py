@@ -60,6 +60,7 @@ from companion.record.codec import (
 from companion.record.reader import RecordedMessage, iter_recorded, read_metadata
 from companion.record.writer import open_mcap
 from geometry.pose import Pose, PoseHistory
+from mapping.query import OccupancyMap
 from perception.segmenter import WireSegmenter
 from planning.types import PlannerOutput
 
@@ -96,6 +97,29 @@ class TopicDiff:
         }
 
 
+@dataclass(frozen=True)
+class ProbeChange:
+    """What the replayed map said at probe point `probe` from the planning cycle at `t_s`
+    (recorded time, s) on: the first cycle, then each one at which `collision`, `solid` or
+    `seen` changed (`OccupancyQuery`); `occupancy` is M of eq. 4.5 at that cycle."""
+
+    t_s: float
+    probe: int
+    collision: bool
+    solid: bool
+    seen: bool
+    occupancy: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "t_s": _json_number(self.t_s),
+            "collision": self.collision,
+            "solid": self.solid,
+            "seen": self.seen,
+            "occupancy": _json_number(self.occupancy),
+        }
+
+
 @dataclass
 class ReplayResult:
     """What `wireavoid replay --json` prints."""
@@ -107,6 +131,8 @@ class ReplayResult:
         default_factory=lambda: {t: TopicDiff() for t in REPLAYED_TOPICS}
     )
     unmatched: int = 0  # recorded outputs whose inputs are not in the recording
+    probes_ned_m: list[list[float]] = field(default_factory=list)
+    probe_changes: list[ProbeChange] = field(default_factory=list)
 
     @property
     def divergences(self) -> int:
@@ -120,7 +146,7 @@ class ReplayResult:
         return min(firsts, key=lambda f: f["index"]) if firsts else None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "files": self.files,
             "messages": self.messages,
             "messages_replayed": self.messages_replayed,
@@ -129,6 +155,15 @@ class ReplayResult:
             "unmatched": self.unmatched,
             "topics": {name: t.to_dict() for name, t in self.topics.items()},
         }
+        if self.probes_ned_m:
+            out["probes"] = [
+                {
+                    "point_ned_m": point,
+                    "changes": [c.to_dict() for c in self.probe_changes if c.probe == k],
+                }
+                for k, point in enumerate(self.probes_ned_m)
+            ]
+        return out
 
 
 def _json_number(value: float) -> float | None:
@@ -193,9 +228,12 @@ class Replayer:
         segmenter: WireSegmenter | None = None,
         tolerance: Tolerance | None = None,
         on_replayed: Callable[[str, float, Any], None] | None = None,
+        probes_ned_m: np.ndarray | None = None,
     ) -> None:
         """on_replayed: called with (bus topic, recorded time, message) for every input the
-        replay reads (camera, vehicle) and every output it computes (the live view)."""
+        replay reads (camera, vehicle) and every output it computes (the live view).
+        probes_ned_m: `(P, 3)` NED points, m, at which every planning cycle's map is queried
+        (`ReplayResult.probe_changes`): when the map first held a point a flight struck."""
         self.settings = settings
         self.tolerance = tolerance or Tolerance()
         seg = segmenter or WireSegmenter.load(params=settings.perception)
@@ -203,6 +241,9 @@ class Replayer:
         self.builder = MapBuilder(settings.mapping, settings.catenary)
         self.pilot = Pilot(settings.planning)
         self.result = ReplayResult(files=[])
+        self._probes = np.zeros((0, 3)) if probes_ned_m is None else np.asarray(probes_ned_m)
+        self.result.probes_ned_m = self._probes.tolist()
+        self._probe_states: list[tuple[bool, bool, bool] | None] = [None] * len(self._probes)
         self.replaced: dict[int, list[Any]] = {}  # recording index -> the replayed payloads
         self._on_replayed = on_replayed
         self._frames: OrderedDict[int, CameraFrame] = OrderedDict()
@@ -352,10 +393,11 @@ class Replayer:
     def _plan(self, m: RecordedMessage, recorded: PlanUpdate) -> None:
         vehicle = recorded.vehicle
         self.pilot.set_speed(recorded.speed_mps, vehicle.stamp_s)
+        occupancy_map = self.builder.occupancy_map()
         output = self.pilot.plan(
             recorded.output.stamp_s,
             vehicle,
-            self.builder.occupancy_map(),
+            occupancy_map,
             recorded.goal_ned_m,
             recorded.hold,
             recorded.commanded_velocity_ned_mps,
@@ -368,6 +410,19 @@ class Replayer:
             recorded.hold, recorded.speed_mps, recorded.commanded_velocity_ned_mps,
         )  # fmt: skip
         self._record("plan", m, c, replayed)
+        if len(self._probes):
+            self._probe(recorded.output.stamp_s, occupancy_map)
+
+    def _probe(self, stamp_s: float, occupancy_map: OccupancyMap) -> None:
+        """Log the probe points whose answer changed since the last planning cycle."""
+        answer = occupancy_map.query(self._probes)
+        for k in range(len(self._probes)):
+            state = (bool(answer.collision[k]), bool(answer.solid[k]), bool(answer.seen[k]))
+            if state != self._probe_states[k]:
+                self._probe_states[k] = state
+                self.result.probe_changes.append(
+                    ProbeChange(stamp_s, k, *state, float(answer.occupancy[k]))
+                )
 
     def _record(self, topic: str, m: RecordedMessage, c: _Comparison, replayed: Any) -> None:
         diff = self.result.topics[topic]
@@ -443,10 +498,13 @@ def replay(
     segmenter: WireSegmenter | None = None,
     tolerance: Tolerance | None = None,
     on_replayed: Callable[[str, float, Any], None] | None = None,
+    probes_ned_m: np.ndarray | None = None,
 ) -> tuple[ReplayResult, Replayer]:
     """Replay the recording made of the parts `paths`; the comparison and the replayer (whose
-    `replaced` outputs `bless` writes)."""
-    replayer = Replayer(settings or recording_settings(paths[0]), segmenter, tolerance, on_replayed)
+    `replaced` outputs `bless` writes). `probes_ned_m`: see `Replayer`."""
+    replayer = Replayer(
+        settings or recording_settings(paths[0]), segmenter, tolerance, on_replayed, probes_ned_m
+    )
     result = replayer.run(iter_recorded(paths))
     result.files = [str(p) for p in paths]
     return result, replayer
