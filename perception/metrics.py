@@ -238,13 +238,16 @@ def metrics_from_counts(
 _RECALL_TOLERANCE_PX = 2
 _FALSE_DISTANCE_PX = 4
 _FALSE_FRAME_PX = 50
+_BACKGROUND_PX = 7  # window whose stereo surfaces tell what a wire pixel is seen against
 
 
 @dataclass(frozen=True)
 class MaskScore:
     """Summed counts of binary wire masks against true wire masks (the mask the map gets,
     not a probability map): true wire pixels and those within 2 px of the mask, mask pixels
-    and those farther than 4 px from any wire, frames and frames with over 50 such pixels."""
+    and those farther than 4 px from any wire, frames and frames with over 50 such pixels;
+    with the frames' stereo surfaces, the true wire pixels seen against a surface (the
+    ground, trees, buildings: most pixels around them hold a stereo return) and those found."""
 
     wire_px: int = 0
     wire_found_px: int = 0
@@ -252,20 +255,31 @@ class MaskScore:
     false_px: int = 0
     frames: int = 0
     frames_with_false: int = 0
+    surface_wire_px: int = 0
+    surface_wire_found_px: int = 0
 
     @classmethod
-    def of(cls, mask: np.ndarray, truth: np.ndarray) -> MaskScore:
-        """The counts of one (H, W) bool `mask` against its (H, W) bool `truth`."""
+    def of(
+        cls, mask: np.ndarray, truth: np.ndarray, surface: np.ndarray | None = None
+    ) -> MaskScore:
+        """The counts of one (H, W) bool `mask` against its (H, W) bool `truth`; `surface`:
+        (H, W) bool, where stereo sees a surface (`postprocess.stereo_surface`), or None."""
         mask, truth = np.asarray(mask, bool), np.asarray(truth, bool)
-        near_mask = cv2.dilate(mask.astype(np.uint8), disk_kernel(_RECALL_TOLERANCE_PX)) > 0
+        found = truth & (cv2.dilate(mask.astype(np.uint8), disk_kernel(_RECALL_TOLERANCE_PX)) > 0)
         false_px = int((mask & far_from_wires(truth)).sum())
+        against = np.zeros_like(truth)
+        if surface is not None:
+            share = cv2.blur(np.asarray(surface, np.float32), (_BACKGROUND_PX, _BACKGROUND_PX))
+            against = truth & (share > 0.5)
         return cls(
             int(truth.sum()),
-            int((truth & near_mask).sum()),
+            int(found.sum()),
             int(mask.sum()),
             false_px,
             1,
             int(false_px > _FALSE_FRAME_PX),
+            int(against.sum()),
+            int((against & found).sum()),
         )
 
     def __add__(self, other: MaskScore) -> MaskScore:
@@ -273,12 +287,21 @@ class MaskScore:
         return MaskScore(*(a + b for a, b in pairs))
 
     def summary(self) -> dict[str, float | int]:
-        """`wire_recall`, `false_share` (of mask pixels) and `frames_with_false_marks`."""
-        return {
+        """`wire_recall`, `false_share` (of mask pixels) and `frames_with_false_marks`; with
+        surfaces, `wire_recall_against_surfaces` and `wire_recall_against_sky` (the rest)."""
+        out: dict[str, float | int] = {
             "wire_recall": round(self.wire_found_px / max(self.wire_px, 1), 4),
             "false_share": round(self.false_px / max(self.mask_px, 1), 4),
             "frames_with_false_marks": self.frames_with_false,
         }
+        if self.surface_wire_px:
+            sky_px = self.wire_px - self.surface_wire_px
+            sky_found = self.wire_found_px - self.surface_wire_found_px
+            out["wire_recall_against_surfaces"] = round(
+                self.surface_wire_found_px / self.surface_wire_px, 4
+            )
+            out["wire_recall_against_sky"] = round(sky_found / max(sky_px, 1), 4)
+        return out
 
 
 def far_from_wires(truth: np.ndarray) -> np.ndarray:

@@ -250,6 +250,8 @@ def test_evaluate_sim_scores_the_shipped_mask_on_rendered_frames():
     assert scores["frames"] == 3 and scores["scenarios"] == ["ladder-wire"]
     assert 0.0 < scores["wire_recall"] <= scores["wire_recall_continued"]  # it only adds pixels
     assert scores["frames_with_false_marks"] <= scores["frames_with_false_marks_continued"] <= 3
+    split = scores["wire_recall_against_surfaces"], scores["wire_recall_against_sky"]
+    assert min(split) <= scores["wire_recall"] <= max(split)  # the two parts of one recall
     bad = runner.invoke(app, ["evaluate-sim", "--scenario", "nowhere"])
     assert bad.exit_code == 2 and "unknown scenario 'nowhere'" in bad.output
 

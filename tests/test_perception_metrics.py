@@ -194,3 +194,19 @@ def test_mask_score_counts_recall_within_2_px_and_false_marks_beyond_4_px():
         "frames_with_false_marks": 1,
     }
     assert MaskScore().summary()["wire_recall"] == 0.0
+
+
+def test_mask_score_splits_recall_by_what_stereo_sees_behind_the_wire():
+    truth = np.zeros((40, 100), bool)
+    truth[20, 10:90] = True  # an 80 px wire: its right half before the ground, its left sky
+    surface = np.zeros_like(truth)
+    surface[:, 50:] = True  # stereo returns from column 50 on
+    mask = np.zeros_like(truth)
+    mask[20, 10:50] = True  # the CNN finds the part against the sky (and 2 px on, in tolerance)
+    score = MaskScore.of(mask, truth, surface)
+    assert (score.surface_wire_px, score.surface_wire_found_px) == (40, 2)
+    summary = (score + MaskScore.of(truth, truth, surface)).summary()
+    assert summary["wire_recall_against_surfaces"] == round(42 / 80, 4)
+    assert summary["wire_recall_against_sky"] == 1.0
+    assert summary["wire_recall"] == round(122 / 160, 4)
+    assert "wire_recall_against_surfaces" not in MaskScore.of(mask, truth).summary()

@@ -147,12 +147,15 @@ def evaluate_sim(
 
     `wire_recall`: share of true wire pixels within 2 px of the mask; `false_share`: share of
     mask pixels farther than 4 px from any wire; `frames_with_false_marks`: frames with more
-    than 50 such pixels; each for the mask and the continued mask (`*_continued`).
+    than 50 such pixels; `wire_recall_against_surfaces` / `_against_sky`: the recall of the
+    wire pixels seen against what stereo sees as a surface (ground, trees, buildings) and of
+    the rest; each for the mask and the continued mask (`*_continued`).
     """
     from companion.cli.settings import load_sim_settings
     from companion.flight.perceive import WireDetector
     from hil.world.scenarios import SCENARIOS
     from perception.metrics import MaskScore
+    from perception.postprocess import stereo_surface
 
     names = scenarios or _SCENARIOS
     if unknown := [n for n in names if n not in SCENARIOS]:
@@ -167,8 +170,9 @@ def evaluate_sim(
         for seed in range(seeds):
             for image, disparity, truth in scenario_frames(settings, scenario, seed, frames):
                 mask = segmenter.mask_of(segmenter.probability(image, "bgr"))
-                plain += MaskScore.of(mask, truth)
-                continued += MaskScore.of(detector.continued(mask, disparity), truth)
+                surface = stereo_surface(disparity, mask.shape)
+                plain += MaskScore.of(mask, truth, surface)
+                continued += MaskScore.of(detector.continued(mask, disparity), truth, surface)
     result = {"scenarios": names, "seeds": seeds, "frames": plain.frames}
     result.update(plain.summary())
     result.update({f"{k}_continued": v for k, v in continued.summary().items()})
