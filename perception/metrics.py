@@ -257,6 +257,7 @@ class MaskScore:
     frames_with_false: int = 0
     surface_wire_px: int = 0
     surface_wire_found_px: int = 0
+    frames_with_surfaces: int = 0
 
     @classmethod
     def of(
@@ -280,6 +281,7 @@ class MaskScore:
             int(false_px > _FALSE_FRAME_PX),
             int(against.sum()),
             int((against & found).sum()),
+            int(surface is not None),
         )
 
     def __add__(self, other: MaskScore) -> MaskScore:
@@ -287,18 +289,18 @@ class MaskScore:
         return MaskScore(*(a + b for a, b in pairs))
 
     def summary(self) -> dict[str, float | int]:
-        """`wire_recall`, `false_share` (of mask pixels) and `frames_with_false_marks`; with
-        surfaces, `wire_recall_against_surfaces` and `wire_recall_against_sky` (the rest)."""
+        """`wire_recall`, `false_share` (of mask pixels) and `frames_with_false_marks`; when
+        scored with surfaces, `wire_recall_against_surfaces` and `wire_recall_against_sky`."""
         out: dict[str, float | int] = {
             "wire_recall": round(self.wire_found_px / max(self.wire_px, 1), 4),
             "false_share": round(self.false_px / max(self.mask_px, 1), 4),
             "frames_with_false_marks": self.frames_with_false,
         }
-        if self.surface_wire_px:
+        if self.frames_with_surfaces:
             sky_px = self.wire_px - self.surface_wire_px
             sky_found = self.wire_found_px - self.surface_wire_found_px
             out["wire_recall_against_surfaces"] = round(
-                self.surface_wire_found_px / self.surface_wire_px, 4
+                self.surface_wire_found_px / max(self.surface_wire_px, 1), 4
             )
             out["wire_recall_against_sky"] = round(sky_found / max(sky_px, 1), 4)
         return out

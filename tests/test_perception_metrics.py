@@ -210,3 +210,6 @@ def test_mask_score_splits_recall_by_what_stereo_sees_behind_the_wire():
     assert summary["wire_recall_against_sky"] == 1.0
     assert summary["wire_recall"] == round(122 / 160, 4)
     assert "wire_recall_against_surfaces" not in MaskScore.of(mask, truth).summary()
+    all_sky = MaskScore.of(mask, truth, np.zeros_like(truth)).summary()  # keys kept, no wire
+    assert all_sky["wire_recall_against_surfaces"] == 0.0
+    assert all_sky["wire_recall_against_sky"] == round(42 / 80, 4)

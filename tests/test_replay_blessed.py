@@ -96,7 +96,9 @@ def test_a_probe_says_when_the_replayed_map_first_held_a_point() -> None:
         return min(c["t_s"] for c in changes if c["collision"])
 
     assert first_collision_s(pole) < 2.0 < first_collision_s(wire)
-    assert all(c["seen"] for c in wire[1:]) and wire[0]["t_s"] <= pole[0]["t_s"]
+    # each probe is logged at the first planning cycle, before any frame saw it
+    assert wire[0]["t_s"] == pole[0]["t_s"] == behind[0]["t_s"] and not wire[0]["seen"]
+    assert all(c["seen"] for c in wire[1:])
     assert len(behind) == 1 and not behind[0]["seen"] and not behind[0]["collision"]
 
 
