@@ -12,6 +12,7 @@ JSON file of the same stem beside it.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -168,18 +169,70 @@ def write_metrics_json(checkpoint_path: str | os.PathLike, record: dict[str, Any
     return out
 
 
+def interpolated_state(
+    fine_tuned: dict[str, torch.Tensor], reference: dict[str, torch.Tensor], alpha: float
+) -> dict[str, torch.Tensor]:
+    """alpha * fine_tuned + (1 - alpha) * reference, tensor by tensor.
+
+    Beyond the thesis (which fine-tunes on real data, 2.4.4, and ships the result): the
+    weight-space ensemble of WiSE-FT (Wortsman et al., CVPR 2022, eq. 1) of a fine-tune and
+    the weights it started from. Both lie in one basin, so the blend is a working network
+    that keeps part of what the fine-tune learned (here: the simulated cameras' wires) and
+    part of what it forgot (here: faint real wires against the sky). ValueError unless both
+    hold the same tensors, or if alpha is outside [0, 1].
+    """
+    if not 0.0 <= alpha <= 1.0:
+        raise ValueError(f"alpha lies in [0, 1], got {alpha}")
+    shapes = {k: tuple(v.shape) for k, v in fine_tuned.items()}
+    if shapes != {k: tuple(v.shape) for k, v in reference.items()}:
+        raise ValueError("the two checkpoints hold different tensors (architectures differ)")
+    return {
+        k: alpha * v + (1.0 - alpha) * reference[k] if v.is_floating_point() else v.clone()
+        for k, v in fine_tuned.items()
+    }
+
+
 def ship_checkpoint(
-    src: str | os.PathLike, dst: str | os.PathLike, extra: dict[str, Any] | None = None
+    src: str | os.PathLike,
+    dst: str | os.PathLike,
+    extra: dict[str, Any] | None = None,
+    interpolate_with: str | os.PathLike | None = None,
+    alpha: float = 1.0,
 ) -> Path:
     """Copy a trained checkpoint without its optimiser state (the form committed to weights/),
-    and write its metrics JSON beside it: metrics, training command and settings, `extra`."""
+    and write its metrics JSON beside it: metrics, training command and settings, `extra`.
+
+    With `interpolate_with` (a checkpoint of the same architecture, usually the weights `src`
+    was fine-tuned from) the weights written are `interpolated_state(src, it, alpha)`. The
+    record then names both and alpha; `src`'s metrics and mask threshold, which belong to
+    other weights, are not carried over (calibrate the threshold again).
+    """
     payload = read_checkpoint(src)
     model = build_model(payload["arch"], payload["in_channels"])
-    model.load_state_dict(payload["state_dict"])
+    state, metrics = payload["state_dict"], payload["metrics"]
+    interpolation: dict[str, Any] = {}
+    if interpolate_with is not None:
+        reference = read_checkpoint(interpolate_with)
+        if (reference["arch"], reference["input_mode"]) != (payload["arch"], payload["input_mode"]):
+            raise ValueError(
+                f"{interpolate_with} is {reference['arch']} ({reference['input_mode']}), "
+                f"{src} is {payload['arch']} ({payload['input_mode']})"
+            )
+        state = interpolated_state(state, reference["state_dict"], alpha)
+        metrics = {}
+        interpolation = {
+            "interpolation": {
+                "fine_tuned": str(src),
+                "reference": str(interpolate_with),
+                "reference_sha256": hashlib.sha256(Path(interpolate_with).read_bytes()).hexdigest(),
+                "alpha": alpha,
+                "method": "WiSE-FT: alpha * fine_tuned + (1 - alpha) * reference",
+            }
+        }
+    model.load_state_dict(state)
     training = payload["training"]
-    path = save_checkpoint(
-        dst, model, payload["arch"], payload["input_mode"], training, payload["metrics"]
-    )
+    # read everything from `interpolate_with` before `dst` (possibly the same file) is written
+    path = save_checkpoint(dst, model, payload["arch"], payload["input_mode"], training, metrics)
     record = {
         "checkpoint": path.name,
         "arch": payload["arch"],
@@ -187,11 +240,12 @@ def ship_checkpoint(
         "command": training.get("command", ""),
         "training": {k: v for k, v in training.items() if k != "loss_history"},
         "final_loss": training["loss_history"][-1][1] if training.get("loss_history") else None,
-        "metrics": payload["metrics"],
+        "metrics": metrics,
+        **interpolation,
         **(extra or {}),
     }
     write_metrics_json(path, record)
-    if payload.get("mask_threshold") is not None:
+    if payload.get("mask_threshold") is not None and not interpolation:
         record_mask_threshold(
             path, payload["mask_threshold"], payload.get("mask_threshold_record", {})
         )

@@ -15,6 +15,7 @@ from perception.checkpoint import read_checkpoint, save_checkpoint
 from perception.params import FAST_MODEL
 from perception.segmenter import WireSegmenter
 from perception.training.labelled import image_mask_pairs
+from perception.zoo import build_model
 
 runner = CliRunner(env={"COLUMNS": "400"})  # error panels unwrapped, for matching
 
@@ -228,6 +229,39 @@ def test_calibrate_threshold_matches_a_reference_models_false_marks_on_wire_free
     assert "false marks of the reference" in result.output
     missing = runner.invoke(app, [*args, "--false-marks-of", str(tmp_path / "none.pt")])
     assert missing.exit_code == 2 and "no checkpoint" in missing.output
+
+
+def test_ship_weights_interpolates_a_fine_tune_with_its_reference(tmp_path, checkpoint):
+    # WiSE-FT: alpha * fine-tune + (1 - alpha) * reference, tensor by tensor. The darkness
+    # models differ only in the gain on the green channel: 0.25 * 6 + 0.75 * 2 = 3.
+    from perception.checkpoint import record_mask_threshold
+
+    tuned = save_checkpoint(tmp_path / "tuned.pt", darkness_model(gain=6.0), "k2", "rgb")
+    record_mask_threshold(tuned, 0.97, {"method": "ods"})  # the fine-tune's, not the blend's
+    out = tmp_path / "blend.pt"
+    args = ["ship-weights", str(tuned), "--dst", str(out), "--interpolate-with", str(checkpoint)]
+    result = runner.invoke(app, [*args, "--alpha", "0.25"])
+    assert result.exit_code == 0, result.output
+    assert f"0.25 of {tuned}" in result.output
+    blend = read_checkpoint(out)
+    weight = blend["state_dict"]["body.0.weight"]
+    assert float(weight[1, 0, 1, 1]) == pytest.approx(-3.0)
+    assert float(weight.abs().sum()) == pytest.approx(9.0)  # 3 channels, nothing else moved
+    assert "mask_threshold" not in blend and blend["metrics"] == {}
+    record = json.loads(out.with_suffix(".json").read_text())["interpolation"]
+    assert record["alpha"] == 0.25 and record["reference"] == str(checkpoint)
+    assert len(record["reference_sha256"]) == 64
+    # shipped over its own reference: the reference is read before it is overwritten
+    args = ["ship-weights", str(tuned), "--dst", str(checkpoint), "--alpha", "0.5"]
+    result = runner.invoke(app, [*args, "--interpolate-with", str(checkpoint)])
+    assert result.exit_code == 0, result.output
+    weight = read_checkpoint(checkpoint)["state_dict"]["body.0.weight"]
+    assert float(weight[1, 2, 1, 1]) == pytest.approx(-4.0)
+    other = save_checkpoint(tmp_path / "other.pt", build_model("k8-k2"), "k8-k2", "rgb")
+    bad = runner.invoke(app, [*args[:3], str(tmp_path / "x.pt"), "--interpolate-with", str(other)])
+    assert bad.exit_code == 2 and "k8-k2 (rgb)" in bad.output and not (tmp_path / "x.pt").exists()
+    bad = runner.invoke(app, [*args[:2], "--alpha", "1.5", "--interpolate-with", str(checkpoint)])
+    assert bad.exit_code == 2 and "--alpha" in bad.output
 
 
 def test_evaluate_at_a_size_resizes_images_and_masks(tmp_path, checkpoint):

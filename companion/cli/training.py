@@ -290,13 +290,36 @@ def ship_weights(
     dst: Annotated[
         Path | None, typer.Option(help="default: perception/weights/ARCH_MODE.pt")
     ] = None,
+    interpolate_with: Annotated[
+        Path | None,
+        typer.Option(
+            help="write alpha * SRC + (1 - alpha) * this checkpoint (same architecture; usually "
+            "the weights SRC was fine-tuned from): WiSE-FT's weight-space ensemble"
+        ),
+    ] = None,
+    alpha: Annotated[
+        float, typer.Option(min=0.0, max=1.0, help="SRC's share with --interpolate-with")
+    ] = 1.0,
 ) -> None:
-    """Copy a trained checkpoint without optimiser state into perception/weights/ + its JSON."""
+    """Copy a trained checkpoint without optimiser state into perception/weights/ + its JSON.
+
+    With --interpolate-with REF --alpha A the weights written are A * SRC + (1 - A) * REF
+    (WiSE-FT, Wortsman et al. 2022): a fine-tune blended with the weights it started from,
+    which keeps part of what the fine-tune forgot. SRC's metrics and mask threshold are not
+    carried over; run `calibrate-threshold` on the result.
+    """
     from perception.checkpoint import WEIGHTS_DIR, read_checkpoint, ship_checkpoint
 
-    payload = read_checkpoint(src)
-    target = dst or WEIGHTS_DIR / f"{payload['arch']}_{payload['input_mode']}.pt"
-    typer.echo(f"wrote {ship_checkpoint(src, target)}")
+    try:
+        payload = read_checkpoint(src)
+        target = dst or WEIGHTS_DIR / f"{payload['arch']}_{payload['input_mode']}.pt"
+        written = ship_checkpoint(src, target, interpolate_with=interpolate_with, alpha=alpha)
+    except (OSError, ValueError) as err:
+        raise typer.BadParameter(str(err)) from err
+    blend = (
+        "" if interpolate_with is None else f" ({alpha:g} of {src}, the rest {interpolate_with})"
+    )
+    typer.echo(f"wrote {written}{blend}")
 
 
 def _rank0() -> bool:
