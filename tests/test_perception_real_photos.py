@@ -156,7 +156,8 @@ def test_shipped_model_masks_real_wires_and_few_natural_edges(real_set, arch):
             recall[image_path.stem] = float(counts.tp_true[0]) / counts.n_true
     # Measured, within 2 px: default (phase 5) bridge 0.79, kite 0.70, false marks 0-0.12% of
     # the natural negatives, 2.0% of the jetty's plank edges, 0.7% of the bridge; fast model
-    # bridge 0.77, kite 0.68, false marks 0.04-0.12%, 1.0% of the jetty, 0.6% of the bridge.
+    # (phase 4, at its recorded 0.9554) bridge 0.75, kite 0.64, false marks 0.01-0.08%, 0.87%
+    # of the jetty, 0.44% of the bridge (phase 3 at 0.95: 0.77, 0.68, 0.04-0.12%, 1.0%, 0.6%).
     assert recall["bridge_stay_cables"] > 0.7 and recall["kite_string"] > 0.6
     natural = [v for k, v in false_share.items() if k not in recall and k != "jetty_planks"]
     assert len(natural) == 4 and max(natural) < 0.005
@@ -222,7 +223,8 @@ def test_aerial_model_beats_the_lsd_floor_on_real_uav_photographs(tmp_path):
 
 def test_the_aerial_models_recorded_threshold_marks_real_scenery_as_the_fast_model_does(tmp_path):
     """Issue 20's calibrated confidence: the aerial weights carry the threshold at which they
-    mark as much of the development set's wire-free photos as the fast weights at 0.95."""
+    mark as much of the development set's wire-free photos as the fast weights at 0.95, and
+    so do the fast weights' phase 4 (matched to phase 3 at 0.95)."""
     from perception.checkpoint import WEIGHTS_DIR
     from perception.metrics import false_mark_share
     from perception.postprocess import wire_mask
@@ -236,7 +238,9 @@ def test_the_aerial_models_recorded_threshold_marks_real_scenery_as_the_fast_mod
     truths = [np.zeros(im.shape[:2], bool) for im in images]
     aerial = WireSegmenter.load(WEIGHTS_DIR / "aerial" / f"{FAST_MODEL}_rgb.pt")
     fast = WireSegmenter.load(params=PerceptionParams(model=FAST_MODEL))
-    assert fast.mask_threshold == 0.95 and 0.95 < aerial.mask_threshold < 0.99  # 0.9713
+    assert (
+        0.95 < fast.mask_threshold < 0.96 and 0.95 < aerial.mask_threshold < 0.99
+    )  # 0.9554, 0.9713
     probs = [aerial.probability(im) for im in images]
     reference = false_mark_share([fast.mask(im) for im in images], truths)  # 0.45%
     calibrated = false_mark_share([aerial.mask_of(p) for p in probs], truths)  # 0.45%

@@ -5,7 +5,8 @@ behaviour is caught with its first divergence, and `--bless` takes it as the new
 Regenerate the flight (after a change of its inputs' format):
     wireavoid sim --world tests/data/replay/hop.toml --config tests/data/replay/hop-settings.toml \
         --record tests/data/replay/hop.mcap
-Re-bless it (after an intentional change of a stage's output):
+Re-bless it (after an intentional change of a stage's output; each stage replays on its
+recorded inputs, so repeat until a plain replay reports no divergence):
     wireavoid replay tests/data/replay/hop.mcap --bless
 """
 
