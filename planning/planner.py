@@ -199,6 +199,7 @@ class LocalPlanner:
                 velocities,
                 distance,
                 (0, 1, 1),
+                occupancy_map,
             )
 
         forward = np.array([np.cos(heading), np.sin(heading), 0.0])
@@ -249,7 +250,14 @@ class LocalPlanner:
             )
             return self._output(now_s, "rotate", np.nan, distance, *counts)
         return self._brake(
-            now_s, vehicle, commanded_velocity_ned_mps, positions, velocities, distance, counts
+            now_s,
+            vehicle,
+            commanded_velocity_ned_mps,
+            positions,
+            velocities,
+            distance,
+            counts,
+            occupancy_map,
         )
 
     def stop(
@@ -377,15 +385,23 @@ class LocalPlanner:
         velocities: np.ndarray,
         distance: float,
         counts: tuple[int, int, int],
+        occupancy_map: OccupancyMap | None = None,
     ) -> PlannerOutput:
         """Stop (kept while already braking): along the path checked free that the vehicle
-        is flying when it is on one, else the stop trajectory of the current bin."""
+        is flying when it is on one, else the stop trajectory of the current bin.
+
+        With `occupancy_map` (the map that made the planner brake) the stop along the path
+        is checked against it first: that path was checked before the obstacle now in the
+        way was mapped (a wire stereo places 2 m ahead), and where it runs into it while the
+        bin's stop trajectory, level along the commanded heading, runs into it later or not
+        at all, the vehicle brakes along the latter (beyond 4.5: a descending path would
+        carry the brake down into a wire below)."""
         if self._state is not PlannerState.BRAKING:
             self._state = PlannerState.BRAKING
             stop = self._library.stop_index
             speed = float(np.linalg.norm(commanded_velocity_ned_mps))
             along = self._stop_on_escape(now_s, vehicle, speed)
-            self._reference = along or self._trajectory_reference(
+            straight = self._trajectory_reference(
                 vehicle.stamp_s,
                 vehicle.position_ned_m,
                 commanded_velocity_ned_mps,
@@ -393,6 +409,9 @@ class LocalPlanner:
                 velocities[stop],
                 brake=True,
             )
+            if along is not None and occupancy_map is not None:
+                along = min((along, straight), key=lambda r: -_arc_to_collision_m(r, occupancy_map))
+            self._reference = along or straight
             self._escape = None
         self._previous_index = None
         return self._output(now_s, "stop", np.nan, distance, *counts)
@@ -644,3 +663,11 @@ class LocalPlanner:
             queries=queries,
             points=points,
         )
+
+
+def _arc_to_collision_m(reference: Reference, occupancy_map: OccupancyMap) -> float:
+    """Path length along `reference` to its first waypoint in collision, m (inf: none)."""
+    points = reference.positions_ned_m
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    hit = np.flatnonzero(np.asarray(occupancy_map.query(points).collision, bool))
+    return float(arc[hit[0]]) if hit.size else np.inf

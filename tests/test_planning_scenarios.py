@@ -369,6 +369,33 @@ def test_a_rewind_changes_height_only_through_space_seen_free() -> None:
     np.testing.assert_allclose(blind[:, 2], START[2])
 
 
+def test_a_brake_for_a_wire_just_mapped_leaves_a_descent_that_would_run_into_it() -> None:
+    """The path being flown was checked before the wire was in the map (stereo places a thin
+    wire about 2 m ahead): braking along it would carry the vehicle down into the wire, so it
+    brakes along the level stop trajectory, which stays clear of it."""
+    planner = LocalPlanner(PARAMS, LIBRARY)
+    goal = np.array([15.0, 0.0, -1.0])  # ahead and 2 m below: the planner descends
+    planner.set_goal(goal, 0.0)
+    world = SyntheticOccupancyMap(omniscient=True)
+    velocity = np.array([1.6, 0.0, 0.0])
+    descent = planner.step(0.0, VehicleState(0.0, START, velocity, 0.0), velocity, world)
+    assert descent.state is PlannerState.TRACKING and descent.label == "descend-1"
+    position, velocity = sample_reference(descent.reference, 0.5)
+    assert velocity[2] > 0.3  # going down
+    # now mapped: a wire 1 m ahead, 0.6 m below, and a dead end beyond it (nothing is free)
+    wire = wire_across(position[0] + 1.0, -position[2] - 0.6)
+    world.wires, world.boxes = [wire], box_canyon(-5.0, position[0] + 4.5, 1.5, 4.5)
+    held = planner.step(0.5, VehicleState(0.5, position, velocity, 0.0), velocity, world)
+    assert held.state is PlannerState.BRAKING and held.reference.brake
+    stop = held.reference.positions_ned_m
+    np.testing.assert_allclose(stop[:, 2], position[2], atol=1e-6)  # level
+    assert wire.distance_m(stop).min() > world.inflation_m
+    # the descent it replaced: within the inflated wire (0.32 m from it)
+    along = descent.reference.positions_ned_m
+    ahead = along[(along[:, 0] > position[0]) & (along[:, 0] < stop[-1, 0] + 0.5)]
+    assert wire.distance_m(ahead).min() < world.inflation_m
+
+
 def test_a_hold_mid_turn_brakes_along_the_turn_that_was_checked_free() -> None:
     """The stop follows the chosen trajectory's path (checked free, its braking distance
     included), not a straight line along the velocity into unchecked space."""
