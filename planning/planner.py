@@ -401,17 +401,21 @@ class LocalPlanner:
             stop = self._library.stop_index
             speed = float(np.linalg.norm(commanded_velocity_ned_mps))
             along = self._stop_on_escape(now_s, vehicle, speed)
-            straight = self._trajectory_reference(
-                vehicle.stamp_s,
-                vehicle.position_ned_m,
-                commanded_velocity_ned_mps,
-                positions[stop],
-                velocities[stop],
-                brake=True,
-            )
-            if along is not None and occupancy_map is not None:
-                along = min((along, straight), key=lambda r: -_arc_to_collision_m(r, occupancy_map))
-            self._reference = along or straight
+            level = np.vstack([vehicle.position_ned_m, positions[stop]])
+            if along is None or (
+                occupancy_map is not None
+                and _arc_to_collision_m(level, occupancy_map)
+                > _arc_to_collision_m(along.positions_ned_m, occupancy_map)
+            ):
+                along = self._trajectory_reference(
+                    vehicle.stamp_s,
+                    vehicle.position_ned_m,
+                    commanded_velocity_ned_mps,
+                    positions[stop],
+                    velocities[stop],
+                    brake=True,
+                )
+            self._reference = along
             self._escape = None
         self._previous_index = None
         return self._output(now_s, "stop", np.nan, distance, *counts)
@@ -665,9 +669,9 @@ class LocalPlanner:
         )
 
 
-def _arc_to_collision_m(reference: Reference, occupancy_map: OccupancyMap) -> float:
-    """Path length along `reference` to its first waypoint in collision, m (inf: none)."""
-    points = reference.positions_ned_m
+def _arc_to_collision_m(points: np.ndarray, occupancy_map: OccupancyMap) -> float:
+    """Path length along the (P, 3) path `points` to its first point in collision, m (inf:
+    none)."""
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     hit = np.flatnonzero(np.asarray(occupancy_map.query(points).collision, bool))
     return float(arc[hit[0]]) if hit.size else np.inf
